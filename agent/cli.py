@@ -1,0 +1,58 @@
+"""``loci``: the genius-loci command line.
+
+Each command group lives in its own module under :mod:`agent.commands` and registers its
+sub-commands; heavy imports happen inside the handlers so ``loci --help`` stays instant.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+from collections.abc import Sequence
+
+from knowledge.errors import LociError
+
+#: Command modules, in the order ``loci --help`` lists them.
+COMMAND_MODULES: list[str] = []
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="loci",
+        description=(
+            "genius-loci: a robot agent that knows what the places around it are. "
+            "It classifies places from 2D laser scans (corridor, room, doorway, hallway), "
+            "builds layered maps of them and talks about them."
+        ),
+        epilog="Run 'loci COMMAND --help' for the options of a command.",
+    )
+    parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
+    parser.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in COMMAND_MODULES:
+        importlib.import_module(name).register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    level = logging.WARNING if args.quiet else (logging.INFO if args.verbose == 0 else logging.DEBUG)
+    logging.basicConfig(
+        level=level, format="%(asctime)s %(levelname)-7s %(name)s: %(message)s", datefmt="%H:%M:%S"
+    )
+    try:
+        result = args.handler(args)
+    except LociError as exc:
+        print(f"loci: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("loci: interrupted", file=sys.stderr)
+        return 130
+    return int(result or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""One module per ``loci`` command group; each has ``register(subparsers)``."""

@@ -1,0 +1,50 @@
+"""Small file helpers shared by the core: atomic writes of bytes, text and images."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+
+def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically: a temp file in the same folder, fsync, rename.
+
+    A reader sees either the old file or the new one, never a torn one, even if the
+    process is killed half-way.
+    """
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        Path(tmp).replace(p)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return p
+
+
+def atomic_write_text(path: str | Path, text: str) -> Path:
+    """:func:`atomic_write_bytes` for UTF-8 text."""
+    return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def encode_image(path: str | Path, image: np.ndarray) -> bytes:
+    """Encode an image in the format named by ``path``'s suffix (.png, .pgm, .jpg)."""
+    ext = Path(path).suffix.lower() or ".png"
+    ok, buf = cv2.imencode(ext, np.ascontiguousarray(image))
+    if not ok:
+        raise ValueError(f"cannot encode a {image.dtype} image of shape {image.shape} as {ext}")
+    return buf.tobytes()
+
+
+def write_image(path: str | Path, image: np.ndarray) -> Path:
+    """Write an image atomically (format from the suffix)."""
+    return atomic_write_bytes(path, encode_image(path, image))

@@ -91,3 +91,13 @@ def test_ipa_maps_load(shared_data: Path) -> None:
     assert 250_000 < int(grid.free.sum()) < 350_000
     raw = OccupancyGrid.from_image(shared_data / "ipa" / "raw" / "freiburg_building79.png", 0.05)
     assert raw.unknown.any() and raw.free.any() and raw.occupied.any()
+
+
+def test_atomic_write_keeps_usual_permissions(tmp_path: Path) -> None:
+    from knowledge.fileio import atomic_write_text
+
+    p = atomic_write_text(tmp_path / "a.txt", "x")
+    assert p.stat().st_mode & 0o777 == 0o644
+    p.chmod(0o600)
+    atomic_write_text(p, "y")
+    assert p.stat().st_mode & 0o777 == 0o600 and p.read_text() == "y"

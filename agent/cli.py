@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from knowledge.errors import LociError
 
 #: Command modules, in the order ``loci --help`` lists them.
-COMMAND_MODULES: list[str] = []
+COMMAND_MODULES: list[str] = ["agent.commands.sick", "agent.commands.sim", "agent.commands.people"]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -20,6 +20,10 @@ class ModelError(LociError, ValueError):
     """A model file that cannot be loaded: wrong format, version or unknown features."""
 
 
+class DataError(LociError, OSError):
+    """A data set (recordings, labelled scans) that is missing or cannot be used."""
+
+
 class NotFittedError(LociError, RuntimeError):
     """An estimator was asked to predict before it was fitted."""
 

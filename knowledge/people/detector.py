@@ -1,0 +1,386 @@
+"""The boosted leg detector (book Sect. 8.3): generalized AdaBoost over the App. C features.
+
+:class:`LegDetector` classifies every segment of a scan with at least ``min_points`` points
+as *person* (a leg, or both legs seen as one segment) or *non-person*, from the features it
+was trained on (by default C.1–C.13, the static ones; C.14 needs consecutive scans), with
+``T = 100`` threshold weak learners (eq. 8.1) boosted by the generalized AdaBoost of Sect. 4.2
+(:class:`~knowledge.places.boosting.GeneralizedAdaBoost`). A segment is a person when
+``F(x) ≥ threshold`` (0 by default, the sign of the strong classifier); every beam of a person
+segment is labelled person, all other beams non-person.
+
+It follows the estimator manners of the places boosters: ``__init__`` stores parameters,
+:meth:`LegDetector.fit` returns ``self``, an unfitted detector raises NotFittedError.
+
+File format ``loci.people-model/1``: one ``.npz`` holding a JSON header as a uint8 array
+``header_json`` and the booster's arrays as ``booster.<name>``; written atomically and read
+with ``allow_pickle=False``; every problem on loading is a :class:`ModelError`.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import zipfile
+import zlib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from importlib import metadata
+from pathlib import Path
+from typing import Any, Self
+
+import numpy as np
+import numpy.typing as npt
+
+from knowledge.errors import ModelError, NotFittedError
+from knowledge.fileio import atomic_write_bytes
+from knowledge.people.features import (
+    FEATURE_CODES,
+    FEATURES,
+    N_FEATURES,
+    STATIC_COLUMNS,
+    feature_label,
+    segment_features,
+)
+from knowledge.people.segmentation import DEFAULT_JUMP, FloatArray, Segmentation, segment_scan
+from knowledge.places.boosting import STATE_ARRAYS, GeneralizedAdaBoost, booster_from_state
+
+FORMAT = "loci.people-model/1"
+FORMAT_FAMILY = "loci.people-model/"
+HEADER_KEY = "header_json"
+BOOSTER_PREFIX = "booster."
+#: The detector shipped with genius-loci (see docs/people.md for the command that made it).
+DEFAULT_MODEL = Path(__file__).resolve().parent / "models" / "legs_default.npz"
+
+
+def genius_loci_version() -> str:
+    try:
+        return metadata.version("genius-loci")
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
+@dataclass(frozen=True, eq=False)
+class SegmentDetection:
+    """The detector's view of one scan.
+
+    Attributes:
+        segmentation: the scan's segments.
+        features: ``(S, 14)`` float64 features C.1–C.14 (C.14 is 0 without a previous scan).
+        score: ``(S,)`` float64 strong-classifier output ``F``; −inf for segments too small
+            to classify.
+        is_person: ``(S,)`` bool, the segment is classified person.
+    """
+
+    segmentation: Segmentation
+    features: FloatArray
+    score: FloatArray
+    is_person: npt.NDArray[np.bool_]
+
+    @property
+    def beam_labels(self) -> npt.NDArray[np.bool_]:
+        """``(B,)`` bool per-beam labels: True = person, False = non-person (or no return)."""
+        return self.segmentation.beam_mask(self.is_person)
+
+    @property
+    def legs(self) -> FloatArray:
+        """``(K, 2)`` centroids of the person segments in metres, sensor frame."""
+        return self.segmentation.centroids()[self.is_person]
+
+    @property
+    def leg_scores(self) -> FloatArray:
+        """``(K,)`` ``F`` of the person segments, in the order of :attr:`legs`."""
+        return self.score[self.is_person]
+
+
+class LegDetector:
+    """Segment classifier person / non-person (see the module doc).
+
+    Parameters: ``n_rounds`` (T), ``columns`` (feature columns used, indices into
+    :data:`~knowledge.people.features.FEATURES`), ``jump`` and ``max_gap`` (segmentation),
+    ``min_points`` (smaller segments are never persons), ``threshold`` on ``F``.
+
+    Fitted: ``booster_`` (a :class:`GeneralizedAdaBoost` over the ``columns``), and
+    ``training_`` (a JSON-able summary that is saved with the model).
+    """
+
+    def __init__(
+        self,
+        n_rounds: int = 100,
+        *,
+        columns: Sequence[int] = STATIC_COLUMNS,
+        jump: float = DEFAULT_JUMP,
+        max_gap: int | None = None,
+        min_points: int = 2,
+        threshold: float = 0.0,
+    ) -> None:
+        self.n_rounds = n_rounds
+        self.columns = tuple(int(c) for c in columns)
+        self.jump = jump
+        self.max_gap = max_gap
+        self.min_points = min_points
+        self.threshold = threshold
+
+    def _check_params(self) -> None:
+        if not self.columns or len(set(self.columns)) != len(self.columns):
+            raise ValueError(f"columns must be distinct feature columns, got {self.columns}")
+        bad = [c for c in self.columns if not 0 <= c < N_FEATURES]
+        if bad:
+            raise ValueError(f"feature columns must be in 0..{N_FEATURES - 1} (C.1..C.14), got {bad}")
+        if int(self.min_points) != self.min_points or self.min_points < 1:
+            raise ValueError(f"min_points must be an integer >= 1, got {self.min_points!r}")
+        if not math.isfinite(self.threshold):
+            raise ValueError(f"threshold must be finite, got {self.threshold!r}")
+
+    @property
+    def uses_motion(self) -> bool:
+        """True if C.14 (which needs the previous scan) is among the columns."""
+        return 13 in self.columns
+
+    def __repr__(self) -> str:
+        codes = ",".join(FEATURE_CODES[c] for c in self.columns)
+        return f"LegDetector(n_rounds={self.n_rounds}, columns=[{codes}], jump={self.jump}, threshold={self.threshold})"
+
+    # -- training / prediction -----------------------------------------------------------
+
+    def fit(self, X: npt.ArrayLike, y: npt.ArrayLike, *, training: Mapping[str, Any] | None = None) -> Self:
+        """Learn from features ``X`` ``(n, 14)`` (all of C.1–C.14) and labels ``y`` ``(n,)`` (True = person).
+
+        ``training`` is a JSON-able summary of the data, saved with the model.
+        """
+        self._check_params()
+        A = self._select(X)
+        self.booster_ = GeneralizedAdaBoost(n_rounds=self.n_rounds, weak="threshold").fit(A, y)
+        self.training_ = dict(training or {})
+        return self
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "booster_"):
+            raise NotFittedError("this LegDetector is not fitted: call fit(X, y) or LegDetector.load(path)")
+
+    def _select(self, X: npt.ArrayLike) -> FloatArray:
+        A = np.asarray(X, dtype=np.float64)
+        if A.ndim != 2 or A.shape[1] != N_FEATURES:
+            raise ValueError(
+                f"X must be (n, {N_FEATURES}) features C.1–C.14 (knowledge.people.features), got shape {A.shape}"
+            )
+        return A[:, list(self.columns)]
+
+    def decision_function(self, X: npt.ArrayLike) -> FloatArray:
+        """``F(x)`` ``(n,)`` of features ``(n, 14)``; ``F ≥ threshold`` means person."""
+        self._check_fitted()
+        A = self._select(X)
+        if A.shape[0] == 0:
+            return np.zeros(0)
+        return self.booster_.decision_function(A)
+
+    def predict(self, X: npt.ArrayLike) -> npt.NDArray[np.bool_]:
+        """``(n,)`` bool, True = person, for features ``(n, 14)`` (segment sizes are not checked here)."""
+        return self.decision_function(X) >= self.threshold
+
+    def detect(
+        self,
+        ranges: npt.ArrayLike,
+        angle_min: float,
+        angle_increment: float,
+        *,
+        range_max: float,
+        previous: npt.ArrayLike | None = None,
+        dt: float | None = None,
+    ) -> SegmentDetection:
+        """Segment one scan ``(B,)`` (metres), compute the features and classify every segment.
+
+        ``previous``/``dt``: the previous scan of the same sensor and the seconds since, for C.14.
+        """
+        self._check_fitted()
+        seg = segment_scan(
+            ranges, angle_min, angle_increment, range_max=range_max, jump=self.jump, max_gap=self.max_gap
+        )
+        X = segment_features(seg, range_max=range_max, previous=previous, dt=dt)
+        score = np.full(seg.n_segments, -np.inf)
+        big = seg.sizes >= self.min_points
+        if big.any():
+            score[big] = self.booster_.decision_function(X[big][:, list(self.columns)])
+        return SegmentDetection(seg, X, score, score >= self.threshold)
+
+    # -- inspection ----------------------------------------------------------------------
+
+    def feature_importance(self) -> FloatArray:
+        """``(14,)`` sum of α over the weak learners of each feature (0 for unused ones)."""
+        self._check_fitted()
+        out = np.zeros(N_FEATURES)
+        out[list(self.columns)] = self.booster_.feature_importance()
+        return out
+
+    def top_features(self, k: int = 5) -> list[dict[str, Any]]:
+        """The ``k`` features with the largest summed α: code, name, importance, learners."""
+        imp = self.feature_importance()
+        counts = np.bincount(np.asarray(self.columns)[self.booster_.weak_feature_], minlength=N_FEATURES)
+        order = [int(i) for i in np.argsort(-imp, kind="stable") if imp[i] > 0][:k]
+        return [
+            {
+                "code": FEATURES[i][0],
+                "name": FEATURES[i][1],
+                "importance": float(imp[i]),
+                "share": float(imp[i] / imp.sum()),
+                "learners": int(counts[i]),
+            }
+            for i in order
+        ]
+
+    def top_learners(self, k: int = 5) -> list[dict[str, Any]]:
+        """The ``k`` weak learners with the largest α (book Table 8.6 ranks these): feature,
+        threshold θ, polarity p (+1: person if f < θ) and α."""
+        self._check_fitted()
+        b = self.booster_
+        order = np.argsort(-b.alpha_, kind="stable")[:k]
+        out = []
+        for t in order.tolist():
+            col = self.columns[int(b.weak_feature_[t])]
+            out.append(
+                {
+                    "round": int(t) + 1,
+                    "code": FEATURES[col][0],
+                    "name": FEATURES[col][1],
+                    "threshold": float(b.weak_threshold_[t]),
+                    "polarity": int(b.weak_polarity_[t]),
+                    "alpha": float(b.alpha_[t]),
+                }
+            )
+        return out
+
+    # -- files ---------------------------------------------------------------------------
+
+    def header(self) -> dict[str, Any]:
+        """The JSON header written to a model file."""
+        self._check_fitted()
+        meta, _ = self.booster_.get_state()
+        return {
+            "format": FORMAT,
+            "features": [FEATURE_CODES[c] for c in self.columns],
+            "feature_names": [feature_label(c) for c in self.columns],
+            "detector": {
+                "jump": float(self.jump),
+                "max_gap": None if self.max_gap is None else int(self.max_gap),
+                "min_points": int(self.min_points),
+                "threshold": float(self.threshold),
+            },
+            "booster": meta,
+            "training": {
+                **self.training_,
+                "saved": datetime.now(UTC).isoformat(timespec="seconds"),
+                "version": genius_loci_version(),
+            },
+        }
+
+    def save(self, path: str | Path) -> Path:
+        """Write the detector to ``path`` (a ``.npz``) atomically; returns the path."""
+        header = self.header()
+        try:
+            text = json.dumps(header, allow_nan=False, sort_keys=True)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(
+                f"the model header is not plain JSON (check the training summary): {exc}"
+            ) from exc
+        _, arrays = self.booster_.get_state()
+        out: dict[str, npt.NDArray[Any]] = {HEADER_KEY: np.frombuffer(text.encode("utf-8"), dtype=np.uint8)}
+        out.update({BOOSTER_PREFIX + k: np.asarray(v) for k, v in arrays.items()})
+        buf = io.BytesIO()
+        np.savez_compressed(buf, **out)  # type: ignore[arg-type]
+        return atomic_write_bytes(path, buf.getvalue())
+
+    @classmethod
+    def load(cls, path: str | Path | None = None) -> LegDetector:
+        """Read a detector written by :meth:`save` (``None``: the bundled :data:`DEFAULT_MODEL`)."""
+        p = Path(path) if path is not None else DEFAULT_MODEL
+        if not p.is_file():
+            hint = "reinstall genius-loci" if path is None else "check the path or run 'loci people train'"
+            raise ModelError(f"{p}: no such people model file; {hint}")
+        header, arrays = _read_npz(p)
+        return _from_header(p, header, arrays)
+
+
+def _read_npz(p: Path) -> tuple[dict[str, Any], dict[str, npt.NDArray[Any]]]:
+    not_model = f"{p}: not a genius-loci people model ({FORMAT} .npz)"
+    try:
+        loaded = np.load(p, allow_pickle=False)
+    except ValueError as exc:
+        raise ModelError(f"{not_model}: unreadable as .npz ({exc})") from exc
+    except (OSError, EOFError, zipfile.BadZipFile) as exc:
+        raise ModelError(f"{not_model}: {exc}; the file may be truncated: copy or train it again") from exc
+    if not isinstance(loaded, np.lib.npyio.NpzFile):
+        raise ModelError(f"{not_model}: it holds a single array, not a model archive")
+    arrays: dict[str, npt.NDArray[Any]] = {}
+    with loaded as npz:
+        if HEADER_KEY not in npz.files:
+            raise ModelError(f"{not_model}: it has no {HEADER_KEY!r} entry")
+        for key in npz.files:
+            try:
+                arrays[key] = npz[key]
+            except ValueError as exc:
+                raise ModelError(
+                    f"{p}: entry {key!r} is a pickled object array, which models never contain; do not use the file"
+                ) from exc
+            except (OSError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+                raise ModelError(f"{p}: entry {key!r} is damaged ({exc}); train or copy it again") from exc
+    raw = arrays.pop(HEADER_KEY)
+    try:
+        if raw.dtype != np.uint8 or raw.ndim != 1:
+            raise ValueError(f"{HEADER_KEY} must be a 1-D uint8 array")
+        header = json.loads(raw.tobytes().decode("utf-8"))
+        if not isinstance(header, dict):
+            raise ValueError("the header is not a JSON object")
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise ModelError(f"{not_model}: its header is not valid JSON ({exc})") from exc
+    return header, arrays
+
+
+def _from_header(p: Path, header: Mapping[str, Any], arrays: Mapping[str, npt.NDArray[Any]]) -> LegDetector:
+    fmt = header.get("format")
+    if not isinstance(fmt, str) or not fmt.startswith(FORMAT_FAMILY):
+        raise ModelError(f"{p}: not a genius-loci people model (format {fmt!r}, expected {FORMAT!r})")
+    if fmt != FORMAT:
+        raise ModelError(
+            f"{p}: model format {fmt!r}, but this genius-loci reads {FORMAT!r}: retrain it with 'loci people train'"
+        )
+    codes = header.get("features")
+    if not isinstance(codes, list) or not codes or not all(isinstance(c, str) for c in codes):
+        raise ModelError(f"{p}: the header's 'features' must be a non-empty list of feature codes")
+    unknown = [c for c in codes if c not in FEATURE_CODES]
+    if unknown:
+        raise ModelError(f"{p}: unknown features {unknown} (known: C.1..C.14): retrain the model")
+    missing = [BOOSTER_PREFIX + k for k in STATE_ARRAYS if BOOSTER_PREFIX + k not in arrays]
+    if missing or "booster" not in header:
+        raise ModelError(
+            f"{p}: the booster is missing ({missing or 'header'}); the file is incomplete: retrain it"
+        )
+    det = dict(header.get("detector") or {})
+    try:
+        booster = booster_from_state(
+            dict(header["booster"]),
+            {k[len(BOOSTER_PREFIX) :]: v for k, v in arrays.items() if k.startswith(BOOSTER_PREFIX)},
+        )
+        if booster.n_features_in_ != len(codes):
+            raise ValueError(
+                f"the booster reads {booster.n_features_in_} features, the header names {len(codes)}"
+            )
+        max_gap = det.get("max_gap")
+        detector = LegDetector(
+            n_rounds=int(booster.get_params()["n_rounds"]),
+            columns=[FEATURE_CODES.index(c) for c in codes],
+            jump=float(det.get("jump", DEFAULT_JUMP)),
+            max_gap=None if max_gap is None else int(max_gap),
+            min_points=int(det.get("min_points", 2)),
+            threshold=float(det.get("threshold", 0.0)),
+        )
+        detector._check_params()
+    except (ValueError, TypeError, KeyError) as exc:
+        raise ModelError(
+            f"{p}: the model is inconsistent ({exc}); it is damaged or was edited: retrain it"
+        ) from exc
+    if not isinstance(booster, GeneralizedAdaBoost):
+        raise ModelError(f"{p}: a people model holds a generalized AdaBoost, not {type(booster).__name__}")
+    detector.booster_ = booster
+    detector.training_ = dict(header.get("training") or {})
+    return detector

@@ -1,0 +1,120 @@
+"""People tracking: constant-velocity Kalman filter, births, deaths, stable ids."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from knowledge.people.tracking import (
+    PeopleTracker,
+    TrackerConfig,
+    cv_process_noise,
+    kalman_predict,
+    kalman_update,
+)
+
+DT = 0.1
+
+
+def test_kalman_prediction_follows_constant_velocity() -> None:
+    x = np.array([1.0, 2.0, 0.5, -0.25])
+    P = np.diag([0.01, 0.01, 0.1, 0.1])
+    x2, P2 = kalman_predict(x, P, 2.0, accel_std=1.0)
+    np.testing.assert_allclose(x2, [2.0, 1.5, 0.5, -0.25])
+    # position uncertainty grows with the velocity's and the process noise
+    assert P2[0, 0] == pytest.approx(0.01 + 4 * 0.1 + 1.0 * 2.0**4 / 4)
+    assert np.all(np.linalg.eigvalsh(P2) > 0)
+    Q = cv_process_noise(0.5, 2.0)
+    np.testing.assert_allclose(Q, Q.T)
+    assert Q[2, 2] == pytest.approx(4.0 * 0.25)
+
+
+def test_kalman_update_pulls_towards_the_measurement_by_the_gain() -> None:
+    x = np.zeros(4)
+    P = np.diag([1.0, 1.0, 1.0, 1.0])
+    x2, P2 = kalman_update(x, P, np.array([1.0, 0.0]), meas_std=1.0)
+    assert x2[0] == pytest.approx(0.5)  # equal prior and measurement variances
+    assert P2[0, 0] == pytest.approx(0.5)
+
+
+def test_tracks_a_walker_and_estimates_its_velocity() -> None:
+    tr = PeopleTracker()
+    v = np.array([1.0, 0.5])
+    for k in range(40):
+        t = k * DT
+        states = tr.update([np.array([1.0, -1.0]) + v * t], t)
+    assert len(states) == 1
+    assert states[0].id == 1
+    np.testing.assert_allclose(states[0].velocity, v, atol=0.05)
+    np.testing.assert_allclose(states[0].position, np.array([1.0, -1.0]) + v * 39 * DT, atol=0.05)
+
+
+def test_births_need_confirmation_and_one_off_clutter_never_becomes_a_track() -> None:
+    cfg = TrackerConfig(confirm_hits=3, tentative_misses=1)
+    tr = PeopleTracker(cfg)
+    assert tr.update([[2.0, 0.0]], 0.0) == []
+    assert len(tr.tracks(include_tentative=True)) == 1
+    assert tr.update([[2.0, 0.0], [5.0, 5.0]], 0.1) == []  # the person again, plus clutter
+    states = tr.update([[2.0, 0.0]], 0.2)
+    assert [s.id for s in states] == [1]
+    assert states[0].hits == 3
+    # the clutter's tentative track was dropped after one miss
+    assert len(tr.tracks(include_tentative=True)) == 1
+
+
+def test_a_track_dies_after_max_misses_and_coasts_until_then() -> None:
+    cfg = TrackerConfig(confirm_hits=2, max_misses=4)
+    tr = PeopleTracker(cfg)
+    for k in range(5):
+        tr.update([[0.1 * k, 0.0]], k * DT)  # walking at 1 m/s along x
+    for m in range(1, 5):
+        states = tr.update([], (4 + m) * DT)
+        assert len(states) == 1 and states[0].misses == m
+        assert states[0].position[0] == pytest.approx(0.4 + 0.1 * m, abs=0.05)  # coasting on
+    assert tr.update([], 9 * DT) == []
+    # a new person later gets a new id: ids are never reused
+    tr.update([[3.0, 3.0]], 1.0)
+    assert [s.id for s in tr.update([[3.0, 3.0]], 1.1)] == [2]
+
+
+def test_two_people_crossing_keep_their_ids(rng: np.random.Generator) -> None:
+    """Two people walk across each other (an X); near the crossing their detections merge."""
+    tr = PeopleTracker()
+    a0, va = np.array([0.0, -2.0]), np.array([1.0, 1.0])
+    b0, vb = np.array([0.0, 2.0]), np.array([1.0, -1.0])
+    ids_a: set[int] = set()
+    ids_b: set[int] = set()
+    for k in range(41):
+        t = k * DT
+        pa = a0 + va * t + rng.normal(0, 0.02, 2)
+        pb = b0 + vb * t + rng.normal(0, 0.02, 2)
+        dets = [(pa + pb) / 2] if np.linalg.norm(pa - pb) < 0.3 else [pa, pb]  # one blob when close
+        states = tr.update(dets, t)
+        if 2 <= k < 10 or k > 30:
+            assert len(states) == 2
+        for s in states:
+            truth_a = a0 + va * t
+            truth_b = b0 + vb * t
+            near_a = np.linalg.norm(s.position - truth_a) < np.linalg.norm(s.position - truth_b)
+            if np.linalg.norm(truth_a - truth_b) > 0.8:  # not ambiguous
+                (ids_a if near_a else ids_b).add(s.id)
+    assert ids_a == {1} or ids_a == {2}
+    assert ids_b == {1, 2} - ids_a
+
+
+def test_time_must_not_go_backwards_and_inputs_must_be_finite() -> None:
+    tr = PeopleTracker()
+    tr.update([[0.0, 0.0]], 1.0)
+    with pytest.raises(ValueError, match="backwards"):
+        tr.update([[0.0, 0.0]], 0.5)
+    with pytest.raises(ValueError, match="finite"):
+        tr.update([[np.nan, 0.0]], 2.0)
+    tr.reset()
+    assert tr.update([[0.0, 0.0]], 0.0) == []
+
+
+def test_config_is_checked() -> None:
+    with pytest.raises(ValueError, match="gate"):
+        TrackerConfig(gate=0.0)
+    with pytest.raises(ValueError, match="confirm_hits"):
+        TrackerConfig(confirm_hits=0)

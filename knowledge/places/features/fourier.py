@@ -22,214 +22,218 @@ robot stands, not on the shape) and n = 1 is 1 by construction. If |c_1| is dege
 **Ma/Mi** (``B.7/B.8``) is ``Ma / max(Mi, 1e-6·Ma)``, capped at 10⁶ when the ellipse
 degenerates to a segment.
 
-Speed: per scan the sums ``S_n = Σ_k τ_k E_k^n`` with ``E_k = e^{−j2πt_k/T}`` are needed for
-the requested n only. Writing ``n = qB + b`` (B ≈ √max|n|), the powers ``E^b`` (b < B) and
-``E^{qB}`` come from short recurrences, and a block of orders sharing q is one small matrix
-product per scan, ``(τ ∘ E^{qB}) @ [E^0 .. E^{B−1}]`` (negative n use
-``S_{−n} = conj(Σ conj(τ) E^n)``), done as real products on the interleaved (re, im) views
-(see :func:`_real_products` for why not complex ones). A block with one or two requested
-orders is done as dot products. All 200 descriptors cost about 2·M·(2B)·(2·max|n|/B) ≈ 0.3 M
-multiply-adds per 360-beam scan, the same as the direct sums.
+Speed (compiled, per scan). The turns ``τ_k`` and the unit phasors ``E_k = e^{−j2πt_k/T}``
+are computed once; the phasors by reduction to a quarter turn and Taylor series of cos and
+sin on [−π/4, π/4] (to ~1e-18, vectorised, no calls into libm). Only the requested sums
+``S_{±n} = Σ_k τ_k E_k^{±n}`` are formed: the powers ``E^n`` come from a short program of
+complex products (baby steps and giant steps, :mod:`.fourier_plan`), and each requested |n|
+is one pass over the vertices accumulating ``Σ τ·E^n`` and ``Σ conj(τ)·E^n`` together
+(``S_{−n} = conj(Σ conj(τ) E^n)``). The loops over the vertices are innermost and
+vectorise; vertices go in blocks of :data:`_BLOCK` so that a block's powers stay in the L1
+cache. Powers are products of at most ~2√max|n| unit phasors in float64: the error is
+~1e-14 of |τ|, far below the features' n²-scaled resolution, so no renormalisation is needed.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from dataclasses import dataclass
-from functools import cache
 
+import numba
 import numpy as np
 
-from knowledge.places.features.batch import ScanBatch
-from knowledge.places.features.raw import Kernel
-from knowledge.places.features.registry import FeatureSpec
+from knowledge.places.features.batch import FASTMATH
+from knowledge.places.features.fourier_plan import MAJOR, MINOR, MUL, RATIO, FourierPlan
 
-#: A block with at least this many requested orders uses the matrix product.
-_MIN_BLOCK_FOR_MATMUL = 3
 #: |S_1| below this means c_1 = 0 (degenerate polygon): descriptors are defined as 0.
 _DEGENERATE_S1 = 1e-9
-#: Multiply-adds per BLAS call: below OpenBLAS's threading threshold (65536·4), see _real_products.
-_MAX_MATMUL_MNK = 150_000
 #: Cap of Ma/Mi when the minor axis vanishes.
 _MAX_AXIS_RATIO = 1e6
+#: Taylor coefficients of cos a and (sin a)/a in powers of a² up to a¹⁶: on |a| ≤ π/4 the first
+#: omitted terms are below 2e-18.
+_COS = tuple((-1.0) ** k / math.factorial(2 * k) for k in range(9))
+_SIN = tuple((-1.0) ** k / math.factorial(2 * k + 1) for k in range(9))
+#: Vertices per block of the sums (a block's rows of powers stay in the L1 cache).
+_BLOCK = 128
 
 
-@dataclass(frozen=True)
-class _Plan:
-    """How to get S_n for a set of orders: block size B, blocks by (q, sign), output layout."""
-
-    block: int
-    #: (q, sign) of the blocks done as one matrix product each, in row order
-    matmul_rows: tuple[tuple[int, int], ...]
-    #: (q, sign, ((n, b), ...)) of the blocks done as dot products
-    dot_rows: tuple[tuple[int, int, tuple[tuple[int, int], ...]], ...]
-    max_q: int
-    #: the orders, and the column of each in the (C, N) array of sums
-    orders: tuple[int, ...]
-    column: dict[int, int]
-    #: for the matrix-product orders: their columns, flat (row·B + b) positions and signs
-    mm_columns: np.ndarray
-    mm_flat: np.ndarray
-    mm_sign: np.ndarray
+@numba.njit(cache=True, nogil=True)
+def make_work(plan: FourierPlan, M: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Scratch arrays of :func:`fourier_features` for M-beam scans: ``vert`` (5, M) for τ, E
+    and the arc positions, ``work`` for a block of vertices (see :func:`_fourier_sums`) and
+    ``sums`` (N, 4) for the N orders |n|."""
+    vert = np.empty((5, M))
+    work = np.empty((plan.rows, _BLOCK))
+    sums = np.empty((plan.order_nn.size, 4))
+    return vert, work, sums
 
 
-@cache
-def _plan(orders: frozenset[int]) -> _Plan:
-    K = max(abs(n) for n in orders)
-    B = math.isqrt(K) + 1
-    ordered = tuple(sorted(orders, key=lambda v: (abs(v), v)))
-    blocks: dict[tuple[int, int], list[tuple[int, int]]] = {}
-    for n in ordered:
-        q, b = divmod(abs(n), B)
-        blocks.setdefault((q, 1 if n > 0 else -1), []).append((n, b))
-    keys = sorted(blocks)
-    mm = tuple(k for k in keys if len(blocks[k]) >= _MIN_BLOCK_FOR_MATMUL)
-    dot = tuple((q, s, tuple(blocks[q, s])) for q, s in keys if len(blocks[q, s]) < _MIN_BLOCK_FOR_MATMUL)
-    column = {n: j for j, n in enumerate(ordered)}
-    mm_n = [(n, r * B + b, s) for r, (q, s) in enumerate(mm) for n, b in blocks[q, s]]
-    return _Plan(
-        block=B,
-        matmul_rows=mm,
-        dot_rows=dot,
-        max_q=max(q for q, _ in keys),
-        orders=ordered,
-        column=column,
-        mm_columns=np.array([column[n] for n, _, _ in mm_n], dtype=np.intp),
-        mm_flat=np.array([f for _, f, _ in mm_n], dtype=np.intp),
-        mm_sign=np.array([s for _, _, s in mm_n], dtype=np.float64),
-    )
+@numba.njit(cache=True, nogil=True, fastmath=FASTMATH)
+def _horner(x: float, coefficients: tuple[float, ...]) -> float:
+    """``Σ_i coefficients[i]·x^i`` by Horner's rule (constant tuples unroll)."""
+    acc = coefficients[-1]
+    for i in range(len(coefficients) - 2, -1, -1):
+        acc = acc * x + coefficients[i]
+    return acc
 
 
-def _turns_and_phases(batch: ScanBatch) -> tuple[np.ndarray, np.ndarray]:
-    """Turns ``τ_k = Δs_k − Δs_{k−1}`` and ``E_k = e^{−j2πt_k/T}``, both (C, M) complex."""
-    x, y = batch.xy
-    ell = batch.edge_len
-    dx = np.roll(x, -1, axis=1) - x
-    dy = np.roll(y, -1, axis=1) - y
-    inv = np.divide(1.0, ell, out=np.zeros_like(ell), where=ell > 0)
-    u = np.empty(x.shape, dtype=np.complex128)
-    np.multiply(dx, inv, out=u.real)
-    np.multiply(dy, inv, out=u.imag)
-    tau = u - np.roll(u, 1, axis=1)
-    t = np.cumsum(ell, axis=1)
-    t -= ell
-    theta = t * (2.0 * math.pi / batch.perimeter)[:, None]
-    E = np.empty_like(tau)
-    np.cos(theta, out=E.real)
-    np.sin(theta, out=E.imag)
-    np.negative(E.imag, out=E.imag)
-    return tau, E
+@numba.njit(cache=True, nogil=True, fastmath=FASTMATH)
+def _turns_and_phasors(x: np.ndarray, y: np.ndarray, ell: np.ndarray, T: float, vert: np.ndarray) -> None:
+    """Turns ``τ_k`` into ``vert[0]``, ``vert[1]`` (re, im) and phasors ``E_k`` into ``vert[2]``,
+    ``vert[3]``; ``vert[4]`` ends up holding the arc positions ``t_k / T``.
 
-
-def fourier_sums(batch: ScanBatch) -> tuple[dict[int, int], np.ndarray]:
-    """``S_n = Σ_k τ_k E_k^n`` for every n in ``batch.fourier_orders`` (cached per batch).
-
-    Returns the column of each order and the (C, N) complex array of sums.
+    ``x``, ``y`` are the M vertices with the first repeated at index M; ``ell`` the edges.
     """
-    cached = batch.cache.get("fourier")
-    if cached is not None:
-        return cached
-    plan = _plan(batch.fourier_orders)
-    tau, E = _turns_and_phases(batch)
-    C, M = tau.shape
-    B = plan.block
-    sums = np.empty((C, len(plan.orders)), dtype=np.complex128)
-    # powers[:, b] = conj(E)^b and powers[:, B + b] = j·conj(E)^b: with W = τ·E^{qB}, the real
-    # dot products of the interleaved (re, im) views give Re and Im of Σ W·E^b (see _real_products)
-    powers = np.empty((C, 2 * B, M), dtype=np.complex128)
-    powers[:, 0] = 1.0
-    conj_e = np.conj(E)
-    for b in range(1, B):
-        np.multiply(powers[:, b - 1], conj_e, out=powers[:, b])
-    np.multiply(powers[:, :B], 1j, out=powers[:, B:])
-    step = np.conj(powers[:, B - 1]) * E  # E^B
-    ctau = np.conj(tau)
-    W = np.empty((C, len(plan.matmul_rows), M), dtype=np.complex128)
-    mm_index = {key: r for r, key in enumerate(plan.matmul_rows)}
-    dot_rows = {(q, s): orders for q, s, orders in plan.dot_rows}
-    Q = np.ones_like(E)  # E^{qB}
-    for q in range(plan.max_q + 1):
-        if q > 0:
-            Q *= step
-        for sign, base in ((1, tau), (-1, ctau)):
-            r = mm_index.get((q, sign))
-            if r is not None:
-                np.multiply(base, Q, out=W[:, r])
-            orders = dot_rows.get((q, sign))
-            if orders:
-                row = (base * Q).view(np.float64)
-                for n, b in orders:
-                    re = np.einsum("ij,ij->i", row, powers[:, b].view(np.float64))
-                    im = np.einsum("ij,ij->i", row, powers[:, B + b].view(np.float64))
-                    sums[:, plan.column[n]] = re + 1j * sign * im
-    if plan.matmul_rows:
-        re_im = _real_products(W, powers)  # (C, rows, 2B)
-        flat = (re_im[:, :, :B] + 1j * re_im[:, :, B:]).reshape(C, -1)[:, plan.mm_flat]
-        flat.imag *= plan.mm_sign
-        sums[:, plan.mm_columns] = flat
-    result = (plan.column, sums)
-    batch.cache["fourier"] = result
-    return result
+    M = ell.size
+    tr, ti, er, ei, u = vert[0], vert[1], vert[2], vert[3], vert[4]
+    inv = 1.0 / ell[M - 1] if ell[M - 1] > 0.0 else 0.0
+    prev_x, prev_y = (x[M] - x[M - 1]) * inv, (y[M] - y[M - 1]) * inv  # the last edge's direction
+    for k in range(M):  # turns: unit edge direction minus the previous one
+        inv = 1.0 / ell[k] if ell[k] > 0.0 else 0.0
+        ux, uy = (x[k + 1] - x[k]) * inv, (y[k + 1] - y[k]) * inv
+        tr[k] = ux - prev_x
+        ti[k] = uy - prev_y
+        prev_x, prev_y = ux, uy
+    # arc positions t_k / T, two edges per step (halves the serial chain of additions)
+    inv_T = 1.0 / T
+    t = 0.0
+    for k in range(0, M - 1, 2):
+        u[k] = t * inv_T
+        u[k + 1] = (t + ell[k]) * inv_T
+        t += ell[k] + ell[k + 1]
+    if M % 2:
+        u[M - 1] = t * inv_T
+    half_pi = 0.5 * math.pi
+    for k in range(M):
+        # 2πu = qπ/2 + a with a ∈ [−π/4, π/4]; e^{−j2πu} = (−j)^q · (cos a − j sin a)
+        v = 4.0 * u[k]
+        q = math.floor(v + 0.5)
+        a = (v - q) * half_pi
+        a2 = a * a
+        c = _horner(a2, _COS)
+        sn = a * _horner(a2, _SIN)
+        quarter = q - 4.0 * math.floor(0.25 * q)
+        odd = quarter == 1.0 or quarter == 3.0
+        re = sn if odd else c
+        im = c if odd else sn
+        er[k] = -re if quarter == 1.0 or quarter == 2.0 else re
+        ei[k] = im if quarter == 2.0 or quarter == 3.0 else -im
 
 
-def _real_products(W: np.ndarray, powers: np.ndarray) -> np.ndarray:
-    """``out[c, r, k] = Σ_m Re(W[c, r, m]·conj(powers[c, k, m]))`` as real matrix products.
+# The block loops index rows of one work array, w[row, k], with k from range(L): numba can
+# prove such indices non-negative (no wrap-around test), which the vectoriser needs, and no
+# array views are made in the loops (each view costs reference-count updates).
 
-    On the interleaved float views (re, im, re, im, ...) a real dot product of ``w`` and
-    ``p`` is ``Re(Σ w·conj(p))``. OpenBLAS runs complex products of this size on several
-    threads, which on a busy machine waits for descheduled workers (5–20× slower); real
-    products below ~2.6e5 multiply-adds stay on the calling thread, so the rows are cut
-    into blocks of at most :data:`_MAX_MATMUL_MNK` multiply-adds.
+
+@numba.njit(cache=True, nogil=True, fastmath=FASTMATH)
+def _mul(w: np.ndarray, a: int, b: int, c: int, L: int) -> None:
+    """Rows ``c, c+1`` = rows ``(a, a+1) · (b, b+1)`` as complex numbers (re, im), first L columns."""
+    for k in range(L):
+        re = w[a, k] * w[b, k] - w[a + 1, k] * w[b + 1, k]
+        w[c + 1, k] = w[a, k] * w[b + 1, k] + w[a + 1, k] * w[b, k]
+        w[c, k] = re
+
+
+@numba.njit(cache=True, nogil=True, fastmath=FASTMATH)
+def _dot4(w: np.ndarray, p: int, L: int) -> tuple[float, float, float, float]:
+    """With τ in rows 0, 1 and ``V`` in rows p, p+1: ``A = Σ τr·Vr, B = Σ τi·Vi, C = Σ τr·Vi,
+    D = Σ τi·Vr``, so that ``Σ τV = (A − B, C + D)`` and ``conj(Σ conj(τ)V) = (A + B, D − C)``."""
+    a = b = c = d = 0.0
+    for k in range(L):
+        vr, vi = w[p, k], w[p + 1, k]
+        a += w[0, k] * vr
+        b += w[1, k] * vi
+        c += w[0, k] * vi
+        d += w[1, k] * vr
+    return a, b, c, d
+
+
+@numba.njit(cache=True, nogil=True, fastmath=FASTMATH)
+def _dot4_product(w: np.ndarray, q: int, p: int, L: int) -> tuple[float, float, float, float]:
+    """:func:`_dot4` for ``V = (rows q, q+1) · (rows p, p+1)``, formed on the fly."""
+    a = b = c = d = 0.0
+    for k in range(L):
+        qr, qi, pr, pi = w[q, k], w[q + 1, k], w[p, k], w[p + 1, k]
+        vr = qr * pr - qi * pi
+        vi = qr * pi + qi * pr
+        a += w[0, k] * vr
+        b += w[1, k] * vi
+        c += w[0, k] * vi
+        d += w[1, k] * vr
+    return a, b, c, d
+
+
+@numba.njit(cache=True, nogil=True, fastmath=FASTMATH)
+def _fourier_sums(vert: np.ndarray, plan: FourierPlan, w: np.ndarray, sums: np.ndarray) -> None:
+    """``sums[j] = (Re S_n, Im S_n, Re S_−n, Im S_−n)`` for the plan's orders |n| (module doc).
+
+    ``vert`` holds τ and E (rows 0–3, see :func:`_turns_and_phasors`); ``w`` and ``sums``
+    come from :func:`make_work`. Per block of L ≤ :data:`_BLOCK` vertices, τ and E are
+    copied to rows 0–3 of ``w`` and the plan's program runs on its rows.
     """
-    C, R, M = W.shape
-    K = powers.shape[1]
-    wv = W.view(np.float64)  # (C, R, 2M)
-    pv = powers.view(np.float64).transpose(0, 2, 1)  # (C, 2M, K)
-    rows = max(1, _MAX_MATMUL_MNK // (K * 2 * M))
-    out = np.empty((C, R, K), dtype=np.float64)
-    for r0 in range(0, R, rows):
-        np.matmul(wv[:, r0 : r0 + rows], pv, out=out[:, r0 : r0 + rows])
-    return out
+    M = vert.shape[1]
+    ops = plan.ops
+    sums[:, :] = 0.0
+    for start in range(0, M, _BLOCK):
+        L = min(_BLOCK, M - start)
+        for row in range(4):  # (explicit loops: numba's slice assignment is much slower)
+            src = vert[row, start:]
+            for k in range(L):
+                w[row, k] = src[k]
+        for i in range(ops.shape[0]):
+            if ops[i, 0] == MUL:
+                _mul(w, ops[i, 1], ops[i, 2], ops[i, 3], L)
+                continue
+            p, q, j = ops[i, 1], ops[i, 2], ops[i, 3]
+            if q < 0:
+                A, Bv, C, D = _dot4(w, p, L)
+            else:
+                A, Bv, C, D = _dot4_product(w, q, p, L)
+            sums[j, 0] += A - Bv
+            sums[j, 1] += C + D
+            sums[j, 2] += A + Bv
+            sums[j, 3] += D - C
 
 
-def fourier_kernel(batch: ScanBatch, specs: Sequence[FeatureSpec]) -> np.ndarray:
-    """B.6 descriptors ``|c_n|/|c_1|``, B.7 Ma, B.8 Mi (metres) and ``B.7/B.8`` Ma/Mi."""
-    column, sums = fourier_sums(batch)
-    a1 = np.abs(sums[:, column[1]])
+@numba.njit(cache=True, nogil=True, fastmath=FASTMATH)
+def fourier_features(
+    x: np.ndarray,
+    y: np.ndarray,
+    ell: np.ndarray,
+    T: float,
+    plan: FourierPlan,
+    vert: np.ndarray,
+    work: np.ndarray,
+    sums: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """The plan's Fourier features of one scan polygon into ``out`` (the scan's output row).
+
+    ``x``, ``y`` (M + 1,) are the vertices with the first repeated, ``ell`` (M,) the edge
+    lengths, ``T`` the perimeter; ``vert``, ``work`` and ``sums`` come from :func:`make_work`.
+    """
+    _turns_and_phasors(x, y, ell, T, vert)
+    _fourier_sums(vert, plan, work, sums)
+    a1 = math.sqrt(sums[0, 0] ** 2 + sums[0, 1] ** 2)  # |n| = 1 comes first
+    am1 = math.sqrt(sums[0, 2] ** 2 + sums[0, 3] ** 2)
     degenerate = a1 < _DEGENERATE_S1
-    out = np.empty((batch.d.shape[0], len(specs)), dtype=np.float64)
-    desc = [j for j, s in enumerate(specs) if s.family == "B.6"]
-    if desc:
-        n = np.array([specs[j].params[0] for j in desc])
-        values = np.abs(sums[:, [column[int(v)] for v in n]])
-        values /= np.where(degenerate, 1.0, a1)[:, None] * (n * n)[None, :]
-        values[degenerate] = 0.0
-        out[:, desc] = values
-    rest = [j for j, s in enumerate(specs) if s.family != "B.6"]
-    if rest:
-        am1 = np.abs(sums[:, column[-1]])
-        scale = batch.perimeter / (4.0 * math.pi**2)  # |c_n| = T / (2πn)² · |S_n|
+    for j in range(plan.order_nn.size):
+        scale = 0.0 if degenerate else 1.0 / (a1 * plan.order_nn[j])
+        if plan.order_pos[j] >= 0:
+            out[plan.order_pos[j]] = math.sqrt(sums[j, 0] ** 2 + sums[j, 1] ** 2) * scale
+        if plan.order_neg[j] >= 0:
+            out[plan.order_neg[j]] = math.sqrt(sums[j, 2] ** 2 + sums[j, 3] ** 2) * scale
+    if plan.single[MAJOR] >= 0 or plan.single[MINOR] >= 0 or plan.single[RATIO] >= 0:
+        scale = T / (4.0 * math.pi**2)  # |c_n| = T / (2πn)² · |S_n|
         major = scale * (a1 + am1)
-        minor = scale * np.abs(a1 - am1)
+        minor = scale * abs(a1 - am1)
         floor = major / _MAX_AXIS_RATIO
-        ratio = major / np.where(minor > floor, minor, np.where(floor > 0, floor, 1.0))
-        ratio = np.where(major > 0, ratio, 1.0)
-        for j in rest:
-            fam = specs[j].family
-            out[:, j] = major if fam == "B.7" else minor if fam == "B.8" else ratio
-    return out
-
-
-def orders_needed(specs: Sequence[FeatureSpec]) -> frozenset[int]:
-    """The Fourier orders n whose sums S_n the Fourier features in ``specs`` need."""
-    orders: set[int] = set()
-    for spec in specs:
-        if spec.family == "B.6":
-            orders.update((1, int(spec.params[0])))
-        elif spec.family in ("B.7", "B.8", "B.7/B.8"):
-            orders.update((1, -1))
-    return frozenset(orders)
-
-
-KERNELS: dict[str, Kernel] = {"fourier": fourier_kernel}
+        if major > 0.0:
+            ratio = major / (minor if minor > floor else (floor if floor > 0.0 else 1.0))
+        else:
+            ratio = 1.0
+        if plan.single[MAJOR] >= 0:
+            out[plan.single[MAJOR]] = major
+        if plan.single[MINOR] >= 0:
+            out[plan.single[MINOR]] = minor
+        if plan.single[RATIO] >= 0:
+            out[plan.single[RATIO]] = ratio

@@ -1,4 +1,4 @@
-"""Set B: features of the polygon Pol(z) (book Appendix B), vectorised over scans.
+"""Set B: features of the polygon Pol(z) (book Appendix B), compiled scan by scan.
 
 Pol(z) has the beam end points as vertices (B.1). Because every beam has a positive length
 and consecutive beams are 2π/M apart, the polygon is star-shaped around the robot, its area
@@ -18,104 +18,204 @@ Where the printed formulas need care:
 * **B.12** is the form factor as printed, ``4πA/√P`` (units m^1.5); **B.14** is
   ``4πA/P²`` (1 for a circle). Both are kept; boosting picks whichever separates.
 * **B.4/B.5, B.15/B.16** use the area centroid of (B.6, B.7) and population deviations.
+
+:func:`polygon_chunk` computes the polygon (vertices, edges, area, perimeter) once per scan
+and from it the requested shape features, Hu invariants and Fourier features
+(:mod:`.fourier`).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import NamedTuple
 
+import numba
 import numpy as np
 
-from knowledge.places.features.batch import ScanBatch, mean_std
-from knowledge.places.features.raw import Kernel
+from knowledge.places.features import fourier
+from knowledge.places.features.batch import FASTMATH, array_max, edges, mean_std, vertices
+from knowledge.places.features.fourier_plan import FourierPlan
 from knowledge.places.features.registry import FeatureSpec
 
+#: Families of set B without parameters (Fourier ones aside), in the order of
+#: :attr:`PolygonPlan.single`.
+SINGLE = ("B.1", "B.2", "B.3", "B.4", "B.5", "B.10", "B.11", "B.12", "B.13", "B.14", "B.15", "B.16")
+_B1, _B2, _B3, _B4, _B5, _B10, _B11, _B12, _B13, _B14, _B15, _B16 = range(len(SINGLE))
+#: Families :func:`make_plan` serves.
+FAMILIES = frozenset((*SINGLE, "B.9"))
 
-def shape_kernel(batch: ScanBatch, specs: Sequence[FeatureSpec]) -> np.ndarray:
-    """B.1–B.5 and B.10–B.16 (area, perimeter and their ratios, centroid distances, moments)."""
-    out = np.empty((batch.d.shape[0], len(specs)), dtype=np.float64)
-    cstats: tuple[np.ndarray, np.ndarray] | None = None
-    for j, spec in enumerate(specs):
-        fam = spec.family
-        if fam in ("B.4", "B.5", "B.15", "B.16"):
-            if cstats is None:
-                cstats = mean_std(batch.centroid_dist)
-            value = cstats[0] if fam in ("B.4", "B.15") else cstats[1]
-            if fam in ("B.15", "B.16"):
-                value = value / batch.centroid_dist.max(axis=1)
-            out[:, j] = value
-        elif fam in ("B.10", "B.11"):
-            m20, m02, m11 = batch.moments2
-            trace = m20 + m02
-            if fam == "B.10":
-                out[:, j] = batch.area / trace
-            else:
-                out[:, j] = np.sqrt((m20 - m02) ** 2 + 4.0 * m11 * m11) / trace
+
+class PolygonPlan(NamedTuple):
+    """Output columns of the requested shape features (−1: not requested).
+
+    ``single`` holds the columns of :data:`SINGLE`, ``hu[k − 1]`` the column of B.9[phi=k];
+    ``hu_max`` is the largest k requested (0: none).
+    """
+
+    single: np.ndarray
+    hu: np.ndarray
+    hu_max: int
+
+    @property
+    def active(self) -> bool:
+        return bool((self.single >= 0).any() or (self.hu >= 0).any())
+
+
+def make_plan(specs: Sequence[FeatureSpec], columns: Sequence[int]) -> PolygonPlan:
+    """The plan for the shape features and Hu invariants ``specs`` written to ``columns``."""
+    single = np.full(len(SINGLE), -1, dtype=np.int64)
+    hu = np.full(7, -1, dtype=np.int64)
+    for spec, col in zip(specs, columns, strict=True):
+        if spec.family == "B.9":
+            hu[int(spec.params[0]) - 1] = col
         else:
-            A = batch.area
-            if fam == "B.1":
-                out[:, j] = A
-                continue
-            P = batch.perimeter
-            if fam == "B.2":
-                out[:, j] = P
-            elif fam == "B.3":
-                out[:, j] = A / P
-            elif fam == "B.12":
-                out[:, j] = 4.0 * math.pi * A / np.sqrt(P)
-            elif fam == "B.13":
-                out[:, j] = P * P / A
-            elif fam == "B.14":
-                out[:, j] = 4.0 * math.pi * A / (P * P)
-            else:
-                raise AssertionError(f"shape kernel got {fam}")
-    return out
+            single[SINGLE.index(spec.family)] = col
+    return PolygonPlan(single, hu, int(np.flatnonzero(hu >= 0).max(initial=-1)) + 1)
 
 
-def hu_invariants(
-    eta20: np.ndarray,
-    eta02: np.ndarray,
-    eta11: np.ndarray,
-    eta30: np.ndarray,
-    eta03: np.ndarray,
-    eta21: np.ndarray,
-    eta12: np.ndarray,
-) -> list[np.ndarray]:
-    """Hu's seven invariants φ1..φ7 of normalised central moments (any matching shapes)."""
-    a, b = eta30 + eta12, eta21 + eta03
-    c, e = eta30 - 3.0 * eta12, 3.0 * eta21 - eta03
-    d20 = eta20 - eta02
+@numba.njit(cache=True, nogil=True, fastmath=FASTMATH)
+def _centroid_features(
+    x: np.ndarray,
+    y: np.ndarray,
+    prod: np.ndarray,
+    total: float,
+    plan: PolygonPlan,
+    dist: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """B.4, B.5, B.15, B.16 from the distances between the area centroid and the vertices.
+
+    With the cross products ``sin(2π/M)·d_i d_{i+1}`` the centroid's factor 1/(6A) becomes
+    ``1 / (3 Σ d_i d_{i+1})`` (``total`` is that sum).
+    """
+    M = prod.size
+    sx = sy = 0.0
+    for i in range(M):
+        sx += (x[i] + x[i + 1]) * prod[i]
+        sy += (y[i] + y[i + 1]) * prod[i]
+    cx, cy = sx / (3.0 * total), sy / (3.0 * total)
+    for i in range(M):
+        dist[i] = math.sqrt((x[i] - cx) ** 2 + (y[i] - cy) ** 2)
+    dmax = array_max(dist)
+    mean, std = mean_std(dist)
+    sg = plan.single
+    if sg[_B4] >= 0:
+        out[sg[_B4]] = mean
+    if sg[_B5] >= 0:
+        out[sg[_B5]] = std
+    if sg[_B15] >= 0:
+        out[sg[_B15]] = mean / dmax
+    if sg[_B16] >= 0:
+        out[sg[_B16]] = std / dmax
+
+
+@numba.njit(cache=True, nogil=True, fastmath=FASTMATH)
+def _moment_features(x: np.ndarray, y: np.ndarray, area: float, plan: PolygonPlan, out: np.ndarray) -> None:
+    """B.10, B.11 and the Hu invariants B.9 of the central vertex moments μ_pq (see the module doc)."""
+    M = x.size - 1
+    mx = my = 0.0
+    for i in range(M):
+        mx += x[i]
+        my += y[i]
+    mx /= M
+    my /= M
+    m20 = m02 = m11 = 0.0
+    for i in range(M):
+        xc, yc = x[i] - mx, y[i] - my
+        m20 += xc * xc
+        m02 += yc * yc
+        m11 += xc * yc
+    sg = plan.single
+    trace = m20 + m02
+    if sg[_B10] >= 0:
+        out[sg[_B10]] = area / trace
+    if sg[_B11] >= 0:
+        out[sg[_B11]] = math.sqrt((m20 - m02) ** 2 + 4.0 * m11 * m11) / trace
+    hu = plan.hu
+    if plan.hu_max == 0:
+        return
+    m30 = m03 = m21 = m12 = 0.0
+    if plan.hu_max >= 3:
+        for i in range(M):
+            xc, yc = x[i] - mx, y[i] - my
+            xx, yy = xc * xc, yc * yc
+            m30 += xx * xc
+            m03 += yy * yc
+            m21 += xx * yc
+            m12 += xc * yy
+    n2, n3 = float(M) ** 2.0, float(M) ** 2.5
+    e20, e02, e11 = m20 / n2, m02 / n2, m11 / n2
+    e30, e03, e21, e12 = m30 / n3, m03 / n3, m21 / n3, m12 / n3
+    a, b = e30 + e12, e21 + e03
+    c, e = e30 - 3.0 * e12, 3.0 * e21 - e03
+    d20 = e20 - e02
     a2, b2 = a * a, b * b
-    return [
-        eta20 + eta02,
-        d20 * d20 + 4.0 * eta11 * eta11,
-        c * c + e * e,
-        a2 + b2,
-        c * a * (a2 - 3.0 * b2) + e * b * (3.0 * a2 - b2),
-        d20 * (a2 - b2) + 4.0 * eta11 * a * b,
-        e * a * (a2 - 3.0 * b2) - c * b * (3.0 * a2 - b2),
-    ]
+    if hu[0] >= 0:
+        out[hu[0]] = e20 + e02
+    if hu[1] >= 0:
+        out[hu[1]] = d20 * d20 + 4.0 * e11 * e11
+    if hu[2] >= 0:
+        out[hu[2]] = c * c + e * e
+    if hu[3] >= 0:
+        out[hu[3]] = a2 + b2
+    if hu[4] >= 0:
+        out[hu[4]] = c * a * (a2 - 3.0 * b2) + e * b * (3.0 * a2 - b2)
+    if hu[5] >= 0:
+        out[hu[5]] = d20 * (a2 - b2) + 4.0 * e11 * a * b
+    if hu[6] >= 0:
+        out[hu[6]] = e * a * (a2 - 3.0 * b2) - c * b * (3.0 * a2 - b2)
 
 
-def hu_kernel(batch: ScanBatch, specs: Sequence[FeatureSpec]) -> np.ndarray:
-    """B.9: Hu's invariants φ_k of the vertex moments (see the module doc)."""
-    M = float(batch.M)
-    m20, m02, m11 = batch.moments2
-    n2 = M**2.0
-    need3 = any(int(s.params[0]) >= 3 for s in specs)
-    if need3:
-        m30, m03, m21, m12 = batch.moments3
-        n3 = M**2.5
-        third = (m30 / n3, m03 / n3, m21 / n3, m12 / n3)
-    else:
-        zero = np.zeros_like(m20)
-        third = (zero, zero, zero, zero)
-    phis = hu_invariants(m20 / n2, m02 / n2, m11 / n2, *third)
-    out = np.empty((batch.d.shape[0], len(specs)), dtype=np.float64)
-    for j, spec in enumerate(specs):
-        out[:, j] = phis[int(spec.params[0]) - 1]
-    return out
+@numba.njit(cache=True, nogil=True)
+def polygon_chunk(
+    d: np.ndarray,
+    cos: np.ndarray,
+    sin: np.ndarray,
+    plan: PolygonPlan,
+    fplan: FourierPlan,
+    out: np.ndarray,
+) -> None:
+    """The plans' set-B features of the cleaned scans ``d`` (S, M) into ``out`` (S, F).
 
-
-KERNELS: dict[str, Kernel] = {"shape": shape_kernel, "hu": hu_kernel}
+    ``cos``, ``sin`` (M,) are the beam directions.
+    """
+    S, M = d.shape
+    step = 2.0 * math.pi / M
+    sg = plan.single
+    want_centroid = sg[_B4] >= 0 or sg[_B5] >= 0 or sg[_B15] >= 0 or sg[_B16] >= 0
+    want_moments = sg[_B10] >= 0 or sg[_B11] >= 0 or plan.hu_max > 0
+    want_fourier = fplan.order_nn.size > 0
+    dp = np.empty(M + 1)
+    x = np.empty(M + 1)
+    y = np.empty(M + 1)
+    buf = np.empty((3, M))
+    prod, ell, dist = buf[0], buf[1], buf[2]
+    vert, work, sums = fourier.make_work(fplan, M)
+    for s in range(S):
+        row = out[s]
+        scan = d[s]
+        for i in range(M):
+            dp[i] = scan[i]
+        dp[M] = scan[0]
+        vertices(dp[:M], cos, sin, x, y)
+        total, P = edges(dp, step, prod, ell)
+        A = 0.5 * math.sin(step) * total
+        if sg[_B1] >= 0:
+            row[sg[_B1]] = A
+        if sg[_B2] >= 0:
+            row[sg[_B2]] = P
+        if sg[_B3] >= 0:
+            row[sg[_B3]] = A / P
+        if sg[_B12] >= 0:
+            row[sg[_B12]] = 4.0 * math.pi * A / math.sqrt(P)
+        if sg[_B13] >= 0:
+            row[sg[_B13]] = P * P / A
+        if sg[_B14] >= 0:
+            row[sg[_B14]] = 4.0 * math.pi * A / (P * P)
+        if want_centroid:
+            _centroid_features(x, y, prod, total, plan, dist, row)
+        if want_moments:
+            _moment_features(x, y, A, plan, row)
+        if want_fourier:
+            fourier.fourier_features(x, y, ell, P, fplan, vert, work, sums, row)

@@ -36,6 +36,7 @@ import copy
 from collections.abc import Iterator, Mapping, Sequence
 from typing import Any, ClassVar, Self
 
+import numba
 import numpy as np
 import numpy.typing as npt
 
@@ -55,7 +56,6 @@ MIN_ERROR = 1e-10
 #: ``r`` at or below this is "no better than chance".
 CHANCE_R = 1e-12
 #: Elements (examples × rounds) evaluated at once when predicting.
-PREDICT_CHUNK_ELEMENTS = 1 << 22
 
 WeakSpec = str | Sequence[str] | Sequence[bool] | npt.NDArray[Any]
 
@@ -304,16 +304,10 @@ class AdaBoost:
 
     def decision_function(self, X: npt.ArrayLike) -> FloatArray:
         """``F(x) = Σ_t c_t h_t(x)`` for ``X`` ``(N, F)``: ``(N,)``; F ≥ 0 is a positive decision."""
-        A = self._check_input(X)
+        A = np.ascontiguousarray(self._check_input(X))
         w2 = 2.0 * self._s * self._coef
         bias = -float(np.sum(self._s * self._coef))
-        out = np.empty(A.shape[0])
-        step = max(1, PREDICT_CHUNK_ELEMENTS // max(1, self.n_rounds_))
-        for r0 in range(0, A.shape[0], step):
-            vals = A[r0 : r0 + step, self.weak_feature_]
-            inside = (self._lo < vals) & (vals < self._hi)
-            out[r0 : r0 + step] = inside @ w2 + bias
-        return out
+        return _weighted_votes(A, self.weak_feature_.astype(np.int64), self._lo, self._hi, w2, bias)
 
     def predict(self, X: npt.ArrayLike) -> npt.NDArray[np.bool_]:
         """True where ``F(x) ≥ 0`` (positive), ``(N,)`` bool."""
@@ -519,3 +513,25 @@ def booster_from_state(meta: Mapping[str, Any], arrays: Mapping[str, npt.NDArray
     if meta.get("stop_reason") is not None:
         booster.stop_reason_ = str(meta["stop_reason"])
     return booster
+
+
+@numba.njit(cache=True, nogil=True)
+def _weighted_votes(
+    A: npt.NDArray[np.floating],
+    feature: npt.NDArray[np.int64],
+    lo: npt.NDArray[np.floating],
+    hi: npt.NDArray[np.floating],
+    w2: FloatArray,
+    bias: float,
+) -> FloatArray:  # pragma: no cover - compiled
+    """``bias + Σ_t w2[t]·[lo[t] < A[i, feature[t]] < hi[t]]`` per row: one pass over each row."""
+    n = A.shape[0]
+    out = np.empty(n)
+    for i in range(n):
+        acc = bias
+        for t in range(feature.shape[0]):
+            v = A[i, feature[t]]
+            if lo[t] < v and v < hi[t]:
+                acc += w2[t]
+        out[i] = acc
+    return out

@@ -253,6 +253,45 @@ def test_cast_cells_on_corridors_and_diagonal_walls(rng: np.random.Generator) ->
     assert np.abs(swept[few] - reference_cast(grid, poses[few], n_beams=360, max_range=4.0)).max() <= tol(4.0)
 
 
+def test_cast_cells_diagonal_beams_through_grid_corners(rng: np.random.Generator) -> None:
+    """45° beams from cell centres pass exactly through grid corners at every step: every beam, exact."""
+    occ = rng.random((23, 29)) < 0.3
+    grid = OccupancyGrid.from_masks(occ, 0.1, origin=(0.5, -1.0, 0.2))
+    cells = grid.free_cells()
+    swept = cast_cells(grid, n_beams=8, max_range=50.0)  # 4 of the 8 beams are diagonals
+    poses = np.column_stack([grid.cell_to_world(cells), np.full(len(cells), grid.yaw)])
+    assert np.abs(swept - reference_cast(grid, poses, n_beams=8, max_range=50.0)).max() <= tol(50.0)
+    # a diagonal beam from a cell whose diagonal neighbour blocks stops at the shared corner
+    r, c = next((r, c) for r, c in cells if r > 0 and c + 1 < occ.shape[1] and occ[r - 1, c + 1])
+    row = int(np.flatnonzero((cells[:, 0] == r) & (cells[:, 1] == c))[0])
+    assert swept[row, 1] == pytest.approx(math.sqrt(2) * 0.5 * 0.1, abs=tol(50.0))
+
+
+def test_cast_cells_in_any_order_with_repeats_and_blocked_starts(rng: np.random.Generator) -> None:
+    occ = rng.random((17, 21)) < 0.2
+    grid = OccupancyGrid.from_masks(occ, 0.05)
+    every = np.argwhere(np.ones(occ.shape, dtype=bool))  # free and blocked cells, row-major
+    full = cast_cells(grid, every, n_beams=37, max_range=2.0)
+    pick = rng.choice(len(every), 300)  # shuffled, with repeats
+    assert np.array_equal(cast_cells(grid, every[pick], n_beams=37, max_range=2.0), full[pick])
+    assert np.all(full[occ.ravel()] == 0.0), "a start inside a blocking cell sees nothing"
+    poses = np.column_stack([grid.cell_to_world(every), np.zeros(len(every))])
+    assert np.abs(full - cast(grid, poses, n_beams=37, max_range=2.0)).max() <= tol(2.0)
+
+
+def test_cast_cells_on_a_map_too_long_for_the_sweep_tables() -> None:
+    """Beams marching over more than 32 766 cells are walked ray by ray, with the same results."""
+    occ = np.zeros((3, 33_000), dtype=bool)
+    occ[0, 20_000] = occ[2, 32_990] = occ[1, 100] = True
+    grid = OccupancyGrid.from_masks(occ, 0.1)
+    cells = np.array([[1, 0], [1, 101], [0, 12_000], [2, 32_000], [1, 32_999]])
+    swept = cast_cells(grid, cells, n_beams=16, max_range=4000.0)
+    poses = np.column_stack([grid.cell_to_world(cells), np.zeros(len(cells))])
+    assert np.abs(swept - cast(grid, poses, n_beams=16, max_range=4000.0)).max() <= tol(4000.0)
+    assert swept[0, 0] == pytest.approx(9.95, abs=tol(4000.0)), "along the row to the cell at column 100"
+    assert swept[1, 0] == np.float32(4000.0), "row 1 is clear to the map's end: leaving the map is a miss"
+
+
 @pytest.mark.data
 def test_cast_cells_on_a_real_map(shared_data: Path, rng: np.random.Generator) -> None:
     grid = OccupancyGrid.from_image(shared_data / "ipa" / "labeled" / "lab_intel.map.png", 0.05)

@@ -7,7 +7,11 @@ Measures, in one process and on one core:
   extra memory (growth of the peak resident set);
 - ``cast`` on random poses (batches, and one 361-beam SICK scan as the simulator asks);
 - ``reference_cast`` on a small sample of the same poses, and the speed-ups against it;
-- that the fast casters agree with the reference on that sample (max abs difference).
+- that the fast casters agree with the reference on that sample (max abs difference);
+- separately, numba's compile time: a fresh process casting on a tiny map with an empty
+  cache (cold: compiles everything) and again with that cache filled (warm: loads it).
+
+The casters are warmed up (compiled or loaded) before anything is timed.
 
     python -m agent.tools.bench_raycast [--data ../shared/data] [--beams 360] [--json out.json]
 
@@ -22,7 +26,9 @@ import json
 import math
 import os
 import resource
+import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -51,6 +57,58 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3
 
 
+#: Run in a fresh process: the seconds to import the casters and to make their first calls.
+_FIRST_CALLS = """
+import json, time
+t0 = time.perf_counter()
+import numpy as np
+from knowledge.metric import OccupancyGrid
+from knowledge.metric.raycast import cast, cast_cells
+t1 = time.perf_counter()
+occ = np.zeros((6, 7), dtype=bool)
+occ[0] = occ[-1] = occ[2, 3] = True
+grid = OccupancyGrid.from_masks(occ, 0.1)
+cast_cells(grid, n_beams=8)
+cast(grid, np.array([0.33, 0.27, 0.1]), n_beams=8)
+print(json.dumps({"import_s": t1 - t0, "first_calls_s": time.perf_counter() - t1}))
+"""
+
+
+def compile_seconds() -> dict[str, float]:
+    """numba's compile time for the casters, in fresh processes sharing a new, empty cache.
+
+    Returns ``cold_s`` (first calls compiling everything), ``warm_s`` (first calls loading
+    the cache the cold run wrote) and ``import_s`` (importing the casters, numba included).
+    """
+    with tempfile.TemporaryDirectory(prefix="numba-cache-") as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache}
+        runs = []
+        for _ in range(2):
+            done = subprocess.run(
+                [sys.executable, "-c", _FIRST_CALLS],
+                env=env,
+                cwd=Path(__file__).resolve().parents[2],
+                capture_output=True,
+                text=True,
+                check=True,
+            )
+            runs.append(json.loads(done.stdout.strip().splitlines()[-1]))
+    return {
+        "cold_s": runs[0]["first_calls_s"],
+        "warm_s": runs[1]["first_calls_s"],
+        "import_s": runs[1]["import_s"],
+    }
+
+
+def _warm_up() -> None:
+    """Compile (or load) the casters before anything is timed."""
+    occ = np.zeros((6, 7), dtype=bool)
+    occ[0] = occ[-1] = occ[2, 3] = True
+    grid = OccupancyGrid.from_masks(occ, 0.1)
+    cast_cells(grid, n_beams=8)
+    cast(grid, np.array([0.33, 0.27, 0.1]), n_beams=8)
+
+
 def _timed(fn: Any, *args: Any, **kwargs: Any) -> tuple[Any, float]:
     t0 = time.perf_counter()
     out = fn(*args, **kwargs)
@@ -65,8 +123,12 @@ def run(
     n_poses: int = 2000,
     n_reference: int = 12,
     seed: int = 0,
+    compile_time: bool = True,
 ) -> dict[str, Any]:
-    """Time the casters on lab_intel; see the module docstring for what is measured."""
+    """Time the casters on lab_intel; see the module docstring for what is measured.
+
+    ``compile_time``: also measure numba's compile time (two fresh processes, ~10 s).
+    """
     path = (data_dir or DEFAULT_DATA) / MAP
     if not path.is_file():
         raise FileNotFoundError(f"{path}: the lab_intel map is needed (point --data at shared/data)")
@@ -80,6 +142,10 @@ def run(
         "n_beams": n_beams,
         "max_range_m": max_range,
     }
+
+    if compile_time:
+        r.update({f"compile_{k}": v for k, v in compile_seconds().items()})
+    _warm_up()
 
     # whole map: every free cell, every beam; peak memory as the growth of the process's
     # peak resident set (tracemalloc would slow numpy's allocations down)
@@ -100,7 +166,7 @@ def run(
     pick = rng.choice(len(cells), n_poses)
     xy = grid.cell_to_world(cells[pick]) + rng.uniform(-0.49, 0.49, (n_poses, 2)) * RESOLUTION
     poses = np.column_stack([xy, rng.uniform(-math.pi, math.pi, n_poses)])
-    cast(grid, poses[:2], n_beams=n_beams, max_range=max_range)  # builds the per-map cache
+    cast(grid, poses[:2], n_beams=n_beams, max_range=max_range)  # caches the map's blocking mask
     scans, wall = _timed(cast, grid, poses, n_beams=n_beams, max_range=max_range)
     r["cast_rays_per_s"] = scans.size / wall
     reps = 50
@@ -138,6 +204,14 @@ def format_result(r: dict[str, Any]) -> str:
             f"  agreement with the reference (max abs diff): cast {r['cast_max_abs_diff_m']:.2e} m, "
             f"cast_cells {r['cells_max_abs_diff_m']:.2e} m; {100 * r['cells_hit_fraction']:.1f} % of beams hit",
         ]
+        + (
+            [
+                f"  numba compile (not in the rates above): cold cache {r['compile_cold_s']:.1f} s, "
+                f"warm cache {r['compile_warm_s']:.2f} s (import {r['compile_import_s']:.2f} s)"
+            ]
+            if "compile_cold_s" in r
+            else []
+        )
     )
 
 
@@ -151,9 +225,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--beams", type=int, default=360)
     parser.add_argument("--poses", type=int, default=2000, help="random poses for cast")
     parser.add_argument("--json", type=Path, help="also write the numbers to this JSON file")
+    parser.add_argument("--no-compile-time", action="store_true", help="skip measuring numba's compile time")
     args = parser.parse_args(argv)
     try:
-        r = run(args.data, n_beams=args.beams, n_poses=args.poses)
+        r = run(args.data, n_beams=args.beams, n_poses=args.poses, compile_time=not args.no_compile_time)
     except FileNotFoundError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

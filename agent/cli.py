@@ -15,7 +15,13 @@ from collections.abc import Sequence
 from knowledge.errors import LociError
 
 #: Command modules, in the order ``loci --help`` lists them.
-COMMAND_MODULES: list[str] = ["agent.commands.sick", "agent.commands.sim", "agent.commands.people"]
+COMMAND_MODULES: list[str] = [
+    "agent.commands.demo",
+    "agent.commands.places",
+    "agent.commands.people",
+    "agent.commands.sick",
+    "agent.commands.sim",
+]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -398,3 +398,8 @@ def _from_header(p: Path, header: Mapping[str, Any], arrays: Mapping[str, npt.ND
         raise ModelError(
             f"{p}: the model is inconsistent ({exc}); it is damaged or was edited: retrain it"
         ) from exc
+
+
+def default_model_path() -> Path:
+    """The bundled place model (trained on generated buildings; see docs/places.md)."""
+    return Path(__file__).resolve().parent / "models" / "default.npz"

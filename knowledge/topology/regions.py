@@ -37,7 +37,7 @@ anyone and is kept.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -472,7 +472,7 @@ def _centroids(ids: np.ndarray, n: int) -> np.ndarray:
 
 def thresholds_from_training(
     label_images: Iterable[np.ndarray],
-    resolution: float,
+    resolution: float | Sequence[float],
     *,
     quantile: float = 0.001,
     scale: float = 0.5,
@@ -489,21 +489,31 @@ def thresholds_from_training(
     labelling leaves behind (they hold almost no area), so the quantile lands on the smallest
     *real* region; half of it stays safely below every real region. On the IPA labelled maps
     (0.05 m) this gives 1.22 m² for places and 0.11 m² for doorways, the book's 1 m² and 0.1 m².
+
+    ``resolution`` is the cell side in metres of every image, or one value per image.
     """
     if not 0.0 <= quantile < 1.0:
         raise ValueError(f"quantile must lie in [0, 1), got {quantile}")
     if not scale > 0:
         raise ValueError(f"scale must be positive, got {scale}")
-    if not (math.isfinite(resolution) and resolution > 0):
-        raise ValueError(f"resolution must be a positive number of metres, got {resolution}")
+    images = list(label_images)
+    if isinstance(resolution, (int, float, np.floating, np.integer)):
+        resolutions = [float(resolution)] * len(images)
+    else:
+        resolutions = [float(r) for r in resolution]
+        if len(resolutions) != len(images):
+            raise ValueError(f"{len(resolutions)} resolutions for {len(images)} label images")
+    for res in resolutions:
+        if not (math.isfinite(res) and res > 0):
+            raise ValueError(f"resolution must be a positive number of metres, got {res}")
     doors = np.asarray(doorway_codes, dtype=np.int64)
     place_areas: list[np.ndarray] = []
     door_areas: list[np.ndarray] = []
     n_images = 0
-    for labels in label_images:
+    for labels, res in zip(images, resolutions, strict=True):
         n_images += 1
         ids, region_labels = label_regions(labels, connectivity)
-        areas = np.bincount(ids.ravel(), minlength=len(region_labels))[1:] * resolution**2
+        areas = np.bincount(ids.ravel(), minlength=len(region_labels))[1:] * res**2
         is_door = np.isin(region_labels[1:], doors)
         place_areas.append(areas[~is_door])
         door_areas.append(areas[is_door])

@@ -1,0 +1,419 @@
+"""``loci places``: train, evaluate and apply place classifiers on occupancy maps."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from agent.commands.topology import register_topology_commands
+
+log = logging.getLogger("loci.places")
+
+#: Where the real data lives by default: ``../shared/data`` beside the repository.
+REPO = Path(__file__).resolve().parents[2]
+
+
+def default_data_dir() -> Path:
+    return Path(os.environ.get("LOCI_DATA", REPO.parent / "shared" / "data"))
+
+
+# ---------------------------------------------------------------------------- arguments
+
+
+def _add_map_sources(p: argparse.ArgumentParser, *, required_hint: str) -> None:
+    g = p.add_argument_group("maps", f"labelled maps to use ({required_hint}); options can be combined")
+    g.add_argument(
+        "--map",
+        action="append",
+        default=[],
+        metavar="MAP",
+        help="an occupancy map: map_server YAML, or an image with --resolution (repeatable, pairs with --labels)",
+    )
+    g.add_argument(
+        "--labels",
+        action="append",
+        default=[],
+        metavar="LABELS",
+        help="the label image of the preceding --map (8-bit PNG: 1 room, 2 corridor, 3 doorway, 4 hallway; "
+        "or the IPA grey values 77/115/179)",
+    )
+    g.add_argument("--resolution", type=float, metavar="M", help="metres per cell for image maps (e.g. 0.05)")
+    g.add_argument(
+        "--codes",
+        choices=("auto", "standard", "ipa"),
+        default="auto",
+        help="how label images encode classes (default: detect)",
+    )
+    g.add_argument(
+        "--ipa",
+        action="append",
+        default=[],
+        metavar="BUILDING",
+        help="a labelled IPA building from DATA/ipa/labeled: Fr52, lab_d_furnitures, lab_intel, lab_ipa, office_e "
+        "(repeatable; 'all' for the five)",
+    )
+    g.add_argument(
+        "--generated",
+        type=int,
+        default=0,
+        metavar="N",
+        help="N procedurally generated office floors (seeds --seed, --seed+1, ...)",
+    )
+    g.add_argument("--seed", type=int, default=0, help="first seed of --generated buildings (default 0)")
+    g.add_argument(
+        "--data",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="the data folder for --ipa (default: $LOCI_DATA or ../shared/data beside the repository)",
+    )
+
+
+def _load_maps(args: argparse.Namespace, progress: Any) -> list[Any]:
+    from knowledge.metric.buildings import generate_building
+    from knowledge.places.dataset import IPA_BUILDINGS, LabelledMap, load_ipa_building, load_labelled_map
+
+    maps: list[LabelledMap] = []
+    if len(args.map) != len(args.labels):
+        raise SystemExit(
+            f"loci places: give one --labels per --map ({len(args.map)} maps, {len(args.labels)} label images)"
+        )
+    for m, lab in zip(args.map, args.labels, strict=True):
+        maps.append(load_labelled_map(m, lab, resolution=args.resolution, codes=args.codes))
+    names = list(IPA_BUILDINGS) if "all" in args.ipa else args.ipa
+    data = args.data or default_data_dir()
+    for b in names:
+        if b not in IPA_BUILDINGS:
+            raise SystemExit(
+                f"loci places: unknown IPA building {b!r}; choose from {', '.join(IPA_BUILDINGS)}"
+            )
+        if not (data / "ipa" / "labeled").is_dir():
+            raise SystemExit(f"loci places: {data}/ipa/labeled not found; pass --data DIR or set LOCI_DATA")
+        maps.append(load_ipa_building(data, b))
+    for i in range(args.generated):
+        seed = args.seed + i
+        b = generate_building(seed)
+        maps.append(LabelledMap(b.grid, b.labels))
+        progress("generating buildings", i + 1, args.generated)
+    if not maps:
+        raise SystemExit("loci places: no maps given: use --map/--labels, --ipa or --generated")
+    return maps
+
+
+def _parse_merge(values: list[str]) -> dict[str, str]:
+    merge: dict[str, str] = {}
+    for v in values:
+        src, sep, dst = v.partition("=")
+        if not sep or not src or not dst:
+            raise SystemExit(f"loci places: --merge takes CLASS=CLASS (e.g. hallway=corridor), got {v!r}")
+        merge[src.strip()] = dst.strip()
+    return merge
+
+
+def _csv(value: str | None) -> tuple[str, ...] | None:
+    if not value:
+        return None
+    return tuple(v.strip() for v in value.split(",") if v.strip())
+
+
+def _emit_json(obj: dict[str, Any]) -> None:
+    json.dump(obj, sys.stdout, indent=2, allow_nan=False)
+    sys.stdout.write("\n")
+
+
+def _pct(v: float) -> str:
+    return f"{100 * v:6.2f} %"
+
+
+# ---------------------------------------------------------------------------- register
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "places",
+        help="place classification from 2D laser scans (train, evaluate, label maps)",
+        description="Semantic place labeling (book chapters 3-4): simulate a 360° scan in free cells of "
+        "occupancy maps, boost simple geometric features into one-vs-all classifiers and arrange them "
+        "in a probabilistic decision list.",
+    )
+    psub = p.add_subparsers(dest="places_command", metavar="COMMAND", required=True)
+
+    t = psub.add_parser(
+        "train",
+        help="train a place model from labelled maps or generated buildings",
+        description="Train a place model: scans from every STRIDE-th labelled free cell, all 309\n"
+        "features, one generalized-AdaBoost booster per class, the decision-list order, and the\n"
+        "label statistics for relaxation. Writes one .npz model file.",
+        epilog="Example: loci places train --ipa Fr52 --ipa lab_ipa --stride 4 --out fr52_ipa.npz\n"
+        "The bundled default model: loci places train --generated 40 --seed 1000 --merge hallway=corridor "
+        "--out knowledge/places/models/default.npz",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    _add_map_sources(t, required_hint="at least one")
+    t.add_argument("--out", type=Path, required=True, metavar="MODEL.npz", help="where to write the model")
+    t.add_argument("--stride", type=int, default=4, help="take a scan every STRIDE cells (default 4)")
+    t.add_argument("--classes", metavar="A,B,...", help="classes to learn (default: every class in the maps)")
+    t.add_argument(
+        "--merge",
+        action="append",
+        default=[],
+        metavar="FROM=TO",
+        help="rename a class before training, e.g. hallway=corridor (repeatable)",
+    )
+    t.add_argument(
+        "--rounds", type=int, default=100, metavar="T", help="boosting rounds per classifier (100)"
+    )
+    t.add_argument(
+        "--order",
+        default="best",
+        metavar="ORDER",
+        help="decision-list order: best (try all), heuristic (by training error) or A,B,C (default best)",
+    )
+    t.add_argument("--booster", choices=("generalized", "discrete"), default="generalized")
+    t.add_argument("--beams", type=int, default=360, help="beams of the simulated 360° scans (360)")
+    t.add_argument("--max-range", type=float, default=30.0, metavar="M", help="sensor maximum range (30 m)")
+    t.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    t.set_defaults(handler=cmd_train)
+
+    e = psub.add_parser(
+        "evaluate",
+        help="accuracy, confusion matrix and the table of all decision-list orders on labelled maps",
+        description="Classify scans simulated in the labelled free cells of maps and compare with the labels: "
+        "accuracy, balanced accuracy, 2-class (room/corridor, doorway cells ignored) accuracy, the "
+        "confusion matrix, and every decision-list order's accuracy (the book's Tables 3.1-3.3).",
+    )
+    _add_map_sources(e, required_hint="at least one")
+    e.add_argument("--model", type=Path, default=None, help="a place model (default: the bundled one)")
+    e.add_argument("--stride", type=int, default=1, help="evaluate every STRIDE-th cell (default 1: all)")
+    e.add_argument(
+        "--merge",
+        action="append",
+        default=[],
+        metavar="FROM=TO",
+        help="rename classes in truth and predictions, e.g. hallway=corridor for the IPA maps",
+    )
+    e.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    e.set_defaults(handler=cmd_evaluate)
+
+    la = psub.add_parser(
+        "label",
+        help="label every free cell of a map",
+        description="Label every free cell of an occupancy map with a place model. Writes the label codes "
+        "(0 none, 1 room, 2 corridor, 3 doorway, 4 hallway) as an 8-bit PNG and a coloured overlay PNG.",
+    )
+    la.add_argument("map", type=Path, metavar="MAP", help="map_server YAML, or an image with --resolution")
+    la.add_argument("--resolution", type=float, metavar="M", help="metres per cell for image maps")
+    la.add_argument("--model", type=Path, default=None, help="a place model (default: the bundled one)")
+    la.add_argument("--out", type=Path, required=True, metavar="LABELS.png", help="label image to write")
+    la.add_argument(
+        "--overlay",
+        type=Path,
+        default=None,
+        metavar="PNG",
+        help="coloured picture to write (default: LABELS.overlay.png beside --out)",
+    )
+    la.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    la.set_defaults(handler=cmd_label)
+
+    register_topology_commands(psub)
+
+
+# ---------------------------------------------------------------------------- handlers
+
+
+def _load_model(path: Path | None) -> Any:
+    from knowledge.places.model import PlaceModel, default_model_path
+
+    return PlaceModel.load(path or default_model_path())
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    from agent.progress import Progress
+    from knowledge.places.training import TrainingConfig, train_place_model
+
+    order: str | tuple[str, ...] = args.order
+    if args.order not in ("best", "heuristic"):
+        order = _csv(args.order) or ()
+    config = TrainingConfig(
+        classes=_csv(args.classes),
+        merge=_parse_merge(args.merge),
+        stride=args.stride,
+        n_beams=args.beams,
+        max_range=args.max_range,
+        rounds=args.rounds,
+        booster=args.booster,
+        order=order,
+    )
+    with Progress(enabled=not args.quiet) as progress:
+        maps = _load_maps(args, progress)
+        log.info("training on %d maps: %s", len(maps), ", ".join(m.name for m in maps))
+        model, timings = train_place_model(maps, config, progress=progress)
+    model.save(args.out)
+    dl = model.decision_list
+    summary = {
+        "model": str(args.out),
+        "maps": list(model.data.maps),
+        "examples_per_class": model.data.examples_per_class,
+        "classes": list(model.classes),
+        "order": list(dl.order_),
+        "order_scores": [{"order": list(o), "accuracy": a} for o, a in dl.order_scores_],
+        "train_errors": dl.train_errors_,
+        "features_used": len(model.feature_names),
+        "features_for_prediction": len(model.prediction_columns()),
+        "timings_s": {k: round(v, 3) for k, v in timings.items()},
+    }
+    if args.json:
+        _emit_json(summary)
+        return 0
+    print(f"trained on {len(maps)} maps ({', '.join(model.data.maps)})")
+    print("examples: " + ", ".join(f"{c} {n}" for c, n in model.data.examples_per_class.items()))
+    print(
+        f"decision list: {' -> '.join(dl.order_)}  ({dl.selection_} accuracy {_pct(dl.order_scores_[0][1])})"
+    )
+    print(
+        f"features: {len(model.prediction_columns())} computed for prediction "
+        f"({len(model.feature_names)} kept for scoring other orders)"
+    )
+    print(
+        "time: "
+        + ", ".join(f"{k} {v:.1f} s" for k, v in timings.items() if k != "total")
+        + f"; total {timings['total']:.1f} s"
+    )
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _importance_table(model: Any, top: int = 7) -> dict[str, list[str]]:
+    """The book's Table 3.5: the most important features of each binary classifier."""
+    out: dict[str, list[str]] = {}
+    for cls, booster in model.decision_list.boosters_.items():
+        imp = booster.feature_importance()
+        order = sorted(range(len(imp)), key=lambda i: -imp[i])[:top]
+        out[cls] = [model.feature_names[i] for i in order if imp[i] > 0]
+    return out
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from agent.progress import Progress
+    from knowledge.places.dataset import simulate_scans
+    from knowledge.places.decision_list import order_name
+    from knowledge.places.metrics import format_confusion, score
+    from knowledge.places.training import merge_classes
+
+    model = _load_model(args.model)
+    merge = _parse_merge(args.merge)
+    with Progress(enabled=not args.quiet) as progress:
+        maps = [merge_classes(m, merge) for m in _load_maps(args, progress)]
+        t0 = time.perf_counter()
+        scans = simulate_scans(
+            maps,
+            stride=args.stride,
+            n_beams=model.scan.n_beams,
+            max_range=model.scan.max_range,
+            progress=progress,
+        )
+        t1 = time.perf_counter()
+        X = np.empty((len(scans), len(model.feature_names)), dtype=np.float32)
+        for start in range(0, len(scans), 16384):
+            stop = min(len(scans), start + 16384)
+            X[start:stop] = model.features(scans.ranges[start:stop], all_features=True)
+            progress("features", stop, len(scans))
+    t2 = time.perf_counter()
+    pred = model.decision_list.predict(X)
+    pred = np.array([merge.get(c, c) for c in pred]) if merge else pred
+    t3 = time.perf_counter()
+    truth = scans.y
+    classes = [c for c in model.classes if c not in merge]
+    s_all = score(truth, pred, classes)
+    two = [c for c in ("room", "corridor") if c in classes]
+    s_two = score(truth, pred, two) if len(two) == 2 else None
+    orders = []
+    if not merge and all(c in model.decision_list.boosters_ for c in model.classes):
+        orders = model.decision_list.order_accuracies(X, truth)
+    result: dict[str, Any] = {
+        "model": str(args.model or "bundled default"),
+        "maps": list(scans.maps),
+        "examples": len(scans),
+        "classes": classes,
+        "order": list(model.decision_list.order_),
+        **{k: v for k, v in s_all.as_dict().items() if k != "n"},
+        "two_class_accuracy": None if s_two is None else round(s_two.accuracy, 6),
+        "two_class_balanced_accuracy": None if s_two is None else round(s_two.balanced_accuracy, 6),
+        "orders": [{"order": list(o), "name": order_name(o), "accuracy": round(a, 6)} for o, a in orders],
+        "important_features": _importance_table(model),
+        "timings_s": {
+            "scans": round(t1 - t0, 3),
+            "features": round(t2 - t1, 3),
+            "classify": round(t3 - t2, 3),
+        },
+    }
+    if args.json:
+        _emit_json(result)
+        return 0
+    print(
+        f"{len(scans)} scans in {', '.join(scans.maps)}; model order {' -> '.join(model.decision_list.order_)}"
+    )
+    print(f"accuracy            {_pct(s_all.accuracy)}   ({len(classes)} classes)")
+    print(f"balanced accuracy   {_pct(s_all.balanced_accuracy)}")
+    if s_two is not None:
+        print(f"room/corridor       {_pct(s_two.accuracy)}   (doorway cells ignored)")
+    print()
+    print(format_confusion(s_all))
+    if orders:
+        print()
+        print("decision list        accuracy")
+        for o, a in orders:
+            mark = "  <- model" if tuple(o) == tuple(model.decision_list.order_) else ""
+            print(f"{order_name(o):<20} {_pct(a)}{mark}")
+    print()
+    print("most important features (book Table 3.5):")
+    for cls, names in result["important_features"].items():
+        print(f"  {cls:<10} {', '.join(names)}")
+    return 0
+
+
+def cmd_label(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from agent.progress import Progress
+    from knowledge import labels as lbl
+    from knowledge.fileio import write_image
+    from knowledge.metric.grid import OccupancyGrid
+    from knowledge.places.labeling import label_map
+
+    grid = OccupancyGrid.load(args.map, args.resolution)
+    model = _load_model(args.model)
+    with Progress(enabled=not args.quiet) as progress:
+        result = label_map(grid, model, progress=progress)
+    lbl.write_label_image(args.out, result.labels, result.legend)
+    overlay_path = args.overlay or args.out.with_name(args.out.stem + ".overlay.png")
+    write_image(overlay_path, lbl.overlay(grid.to_image(), result.labels))
+    counts = {c: int(np.sum(result.labels == code)) for c, code in result.codes.items()}
+    area = {c: round(n * grid.resolution**2, 2) for c, n in counts.items()}
+    summary = {
+        "map": str(args.map),
+        "cells": len(result.cells),
+        "resolution": grid.resolution,
+        "classes": list(result.classes),
+        "cells_per_class": counts,
+        "area_m2_per_class": area,
+        "labels": str(args.out),
+        "overlay": str(overlay_path),
+        "timings_s": {k: round(v, 3) for k, v in result.timings.items()},
+    }
+    if args.json:
+        _emit_json(summary)
+        return 0
+    print(f"labelled {len(result.cells)} free cells of {grid.name} in {result.timings['total']:.1f} s")
+    for c in result.classes:
+        print(f"  {c:<10} {counts[c]:>9} cells  {area[c]:>9.1f} m²")
+    print(f"wrote {args.out} and {overlay_path}")
+    return 0

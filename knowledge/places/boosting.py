@@ -33,7 +33,7 @@ The confidence ``C⁺ = e^F/(e^{−F} + e^F)`` (eq. 4.2–4.4) is computed from 
 from __future__ import annotations
 
 import copy
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Any, ClassVar, Self
 
 import numba
@@ -170,12 +170,14 @@ class AdaBoost:
         sample_weight: npt.ArrayLike | None = None,
         *,
         presorted: SortedFeatures | None = None,
+        on_round: Callable[[int], None] | None = None,
     ) -> Self:
         """Learn up to ``n_rounds`` weak learners from ``X`` ``(N, F)`` and binary ``y`` ``(N,)``.
 
         ``sample_weight`` ``(N,)`` ≥ 0 scales the initial weights (within each class when
         ``balanced``). ``presorted`` is a :class:`SortedFeatures` already built from this
         very ``X``; pass one to share the sort between boosters trained on the same matrix.
+        ``on_round(t)`` is called after each round ``t = 1..`` (for progress reports).
         """
         if not isinstance(self.n_rounds, int | np.integer) or self.n_rounds < 1:
             raise ValueError(f"n_rounds must be a positive integer, got {self.n_rounds!r}")
@@ -222,6 +224,8 @@ class AdaBoost:
             alphas.append(alpha)
             errors.append(error)
             Ftrain += self.coef_scale * alpha * h
+            if on_round is not None:
+                on_round(t + 1)
             if perfect:
                 stop = "perfect"
                 break

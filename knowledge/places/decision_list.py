@@ -158,6 +158,7 @@ class DecisionList:
         classes: ClassSpec | None = None,
         selection_data: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
         sample_weight: npt.ArrayLike | None = None,
+        progress: Callable[[str, int, int], None] | None = None,
     ) -> Self:
         """Train one booster per class on ``X`` ``(N, F)``, ``y`` ``(N,)``, then choose the order.
 
@@ -195,9 +196,17 @@ class DecisionList:
 
         sf = SortedFeatures(A)
         self.classes_ = np.asarray(ordered, dtype=str)
-        self.boosters_ = {
-            c: self._make_booster().fit(A, names == c, sample_weight, presorted=sf) for c in ordered
-        }
+        self.boosters_ = {}
+        for c in ordered:
+            booster = self._make_booster()
+            report = None
+            if progress is not None:
+                total = int(booster.get_params()["n_rounds"])
+
+                def report(t: int, _c: str = c, _total: int = total) -> None:
+                    progress(f"boosting {_c}", t, _total)
+
+            self.boosters_[c] = booster.fit(A, names == c, sample_weight, presorted=sf, on_round=report)
         del sf
         self.train_errors_ = {c: float(b.train_error_) for c, b in self.boosters_.items()}
 

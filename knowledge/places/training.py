@@ -181,11 +181,7 @@ def train_place_model(
     factory = functools.partial(booster_cls, n_rounds=config.rounds, weak=config.weak)
     order: str | tuple[str, ...] = config.order
     dl = DecisionList(factory, order=order)
-    if progress is not None:
-        progress("boosting", 0, len(classes))
-    dl.fit(X, scans.y, classes=classes)
-    if progress is not None:
-        progress("boosting", len(classes), len(classes))
+    dl.fit(X, scans.y, classes=classes, progress=progress)
     t3 = time.perf_counter()
     stats = relaxation_stats(maps, classes)
     thresholds = correction_thresholds(maps, classes)

@@ -50,6 +50,7 @@ test: lint typecheck unit
 
 eval: $(STAMP)
 	$(BIN)/python -m agent.tools.evaluate_places --out docs/results
+	$(BIN)/python -m agent.tools.evaluate_topology --out docs/results
 
 bench: $(BENCH_STAMP)
 	$(BIN)/python -m agent.tools.bench --out docs/results

@@ -1,0 +1,96 @@
+"""``make bench``: run every benchmark in its own process and collect the results.
+
+Each benchmark measures speed as a ratio against a baseline run in the same process (the
+slow reference implementation, scikit-learn, the line rate, ...). This driver runs them
+one after the other (never in parallel: they would disturb each other), saves each one's
+JSON beside its printed report, and writes ``bench.md`` with the commands and the reports.
+
+Run: ``make bench`` or ``python -m agent.tools.bench --out docs/results``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import subprocess
+import sys
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+
+from knowledge.fileio import atomic_write_text
+
+#: (name, module, extra arguments, what it measures)
+BENCHMARKS: list[tuple[str, str, list[str], str]] = [
+    ("raycast", "agent.tools.bench_raycast", [], "ray casting: rays per second vs the reference caster"),
+    ("features", "agent.tools.bench_features", [], "scan features: vectors per second vs the reference"),
+    (
+        "labeling",
+        "agent.tools.bench_labeling",
+        [],
+        "whole-map labeling of lab_intel (target ≤ 10 s, one core)",
+    ),
+    ("boosting", "agent.tools.bench_boosting", [], "AdaBoost training vs scikit-learn (target ≥ 5×)"),
+    ("topology", "agent.tools.bench_topology", [], "relaxation and regions on office_g"),
+    ("sick", "agent.tools.bench_sick", [], "SICK telegram codec vs the 500 kbaud line rate"),
+    ("people", "agent.tools.bench_people", [], "leg detection per 768-beam scan vs 75 Hz"),
+]
+
+#: benchmarks whose --json takes a file (the others print JSON with --json)
+JSON_FILE = {"raycast", "features", "labeling", "boosting", "topology"}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m agent.tools.bench", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", type=Path, default=Path("docs/results"), help="where bench.md and the JSON go")
+    ap.add_argument("--only", action="append", default=[], help="run only these (repeatable)")
+    args = ap.parse_args(argv)
+    outdir = args.out / "bench"
+    outdir.mkdir(parents=True, exist_ok=True)
+    env = dict(os.environ, NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    sections: list[str] = []
+    failed: list[str] = []
+    for name, module, extra, what in BENCHMARKS:
+        if args.only and name not in args.only:
+            continue
+        json_path = outdir / f"{name}.json"
+        cmd = [sys.executable, "-m", module, *extra]
+        if name in JSON_FILE:
+            cmd += ["--json", str(json_path)]
+        print(f"[bench] {name}: {what} ...", file=sys.stderr, flush=True)
+        t0 = time.perf_counter()
+        proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+        seconds = time.perf_counter() - t0
+        if proc.returncode != 0:
+            failed.append(name)
+            report = f"FAILED (exit {proc.returncode})\n{proc.stderr[-2000:]}"
+        else:
+            report = proc.stdout.rstrip()
+            if name not in JSON_FILE:
+                # these print their report as text; ask again for JSON
+                js = subprocess.run([*cmd, "--json"], capture_output=True, text=True, env=env)
+                if js.returncode == 0:
+                    atomic_write_text(json_path, js.stdout)
+        shown = " ".join(["python -m", module, *extra])
+        sections += [f"## {name}: {what}", "", f"`{shown}` ({seconds:.0f} s)", "", "```", report, "```", ""]
+    head = [
+        "# Benchmarks",
+        "",
+        "Made by `make bench` (`python -m agent.tools.bench`), one benchmark per process, one after "
+        "the other, numba and BLAS limited to one thread.",
+        f"Machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}; "
+        f"{datetime.now(UTC).date().isoformat()}. Speeds are ratios against baselines run in the same "
+        "process; absolute times depend on the machine and on what else runs on it.",
+        "",
+    ]
+    atomic_write_text(args.out / "bench.md", "\n".join(head + sections))
+    print("\n".join(head + sections))
+    if failed:
+        print(f"[bench] failed: {', '.join(failed)}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

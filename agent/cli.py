@@ -21,6 +21,7 @@ COMMAND_MODULES: list[str] = [
     "agent.commands.people",
     "agent.commands.sick",
     "agent.commands.sim",
+    "agent.commands.record",
 ]
 
 

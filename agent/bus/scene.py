@@ -1,0 +1,125 @@
+"""``foxglove.SceneUpdate`` pictures of the navigation graph and the areas (Foxglove 3D panel).
+
+Built from plain dicts so the core's classes need not know Foxglove:
+
+* graph: ``{"nodes": [{"id", "x", "y", "kind", "label"}, ...], "edges": [[a, b], ...]}``
+  (the ``loci.graph/1`` message is such a dict); ``kind`` is ``"place"`` or ``"doorway"``,
+  ``label`` a class name or None; positions in metres in ``frame_id``. Edges may also be
+  ``{"source": a, "target": b, ...}`` objects, as in the ``loci.navgraph/1`` document.
+* areas: ``{"areas": [{"id", "label", "nodes": [node ids]}, ...]}`` (``loci.areas/1``).
+
+The graph is one entity ``graph``: a sphere per node coloured by its class (doorway nodes in
+the doorway colour, unlabelled nodes grey), and the edges as one line list. The areas are
+one entity ``areas``: a text label per area over the centroid of its nodes. Each update
+replaces the whole entity, so nodes or areas that disappeared disappear from the picture.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from foxglove import messages as fg
+
+from knowledge.labels import CLASS_CODES, CLASS_COLORS_BGR
+
+#: Sphere diameter of a node, metres.
+NODE_SIZE = 0.25
+_UNKNOWN_RGBA = (0.6, 0.6, 0.6, 1.0)
+
+
+def class_rgba(label: str | None) -> tuple[float, float, float, float]:
+    """The overlay colour of a place class (RGBA in 0..1); grey for None or unknown classes."""
+    code = CLASS_CODES.get(label or "")
+    if code is None or code not in CLASS_COLORS_BGR:
+        return _UNKNOWN_RGBA
+    b, g, r = CLASS_COLORS_BGR[code]
+    return (r / 255.0, g / 255.0, b / 255.0, 1.0)
+
+
+def _color(rgba: tuple[float, float, float, float]) -> fg.Color:
+    return fg.Color(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
+
+
+def _stamp(stamp: float) -> fg.Timestamp:
+    return fg.Timestamp.from_epoch_secs(max(0.0, float(stamp)))
+
+
+def _pose(x: float, y: float, z: float = 0.0) -> fg.Pose:
+    return fg.Pose(position=fg.Vector3(x=x, y=y, z=z), orientation=fg.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0))
+
+
+def _node_positions(graph: Mapping[str, Any]) -> dict[int, tuple[float, float]]:
+    return {int(n["id"]): (float(n["x"]), float(n["y"])) for n in graph.get("nodes", ())}
+
+
+def graph_scene(
+    graph: Mapping[str, Any], *, frame_id: str = "odom", stamp: float | None = None
+) -> fg.SceneUpdate:
+    """The navigation graph as a SceneUpdate (entity ``graph``).
+
+    ``stamp`` defaults to ``graph["stamp"]`` (seconds since the epoch), else 0.
+    """
+    when = _stamp(graph.get("stamp", 0.0) if stamp is None else stamp)
+    spheres = []
+    for n in graph.get("nodes", ()):
+        label = "doorway" if n.get("kind") == "doorway" else n.get("label")
+        spheres.append(
+            fg.SpherePrimitive(
+                pose=_pose(float(n["x"]), float(n["y"])),
+                size=fg.Vector3(x=NODE_SIZE, y=NODE_SIZE, z=NODE_SIZE),
+                color=_color(class_rgba(label)),
+            )
+        )
+    pos = _node_positions(graph)
+    points = []
+    for edge in graph.get("edges", ()):
+        a, b = (edge["source"], edge["target"]) if isinstance(edge, Mapping) else edge
+        if int(a) in pos and int(b) in pos:
+            for nid in (int(a), int(b)):
+                x, y = pos[nid]
+                points.append(fg.Point3(x=x, y=y, z=0.0))
+    lines = []
+    if points:
+        lines.append(
+            fg.LinePrimitive(
+                type=fg.LinePrimitiveLineType.LineList,
+                pose=_pose(0.0, 0.0),
+                thickness=0.04,
+                points=points,
+                color=_color((0.2, 0.2, 0.2, 1.0)),
+            )
+        )
+    entity = fg.SceneEntity(timestamp=when, frame_id=frame_id, id="graph", spheres=spheres, lines=lines)
+    return fg.SceneUpdate(entities=[entity])
+
+
+def areas_scene(
+    areas: Mapping[str, Any], graph: Mapping[str, Any], *, frame_id: str = "odom", stamp: float | None = None
+) -> fg.SceneUpdate:
+    """The areas as a SceneUpdate (entity ``areas``): each area's class over its nodes' centroid.
+
+    ``graph`` gives the node positions; nodes of an area missing from it are ignored, and an
+    area with none of its nodes in the graph is not drawn.
+    """
+    when = _stamp(areas.get("stamp", 0.0) if stamp is None else stamp)
+    pos = _node_positions(graph)
+    texts = []
+    for area in areas.get("areas", ()):
+        xy = [pos[int(n)] for n in area.get("nodes", ()) if int(n) in pos]
+        if not xy:
+            continue
+        cx = sum(p[0] for p in xy) / len(xy)
+        cy = sum(p[1] for p in xy) / len(xy)
+        label = area.get("label")
+        texts.append(
+            fg.TextPrimitive(
+                pose=_pose(cx, cy, 1.0),
+                billboard=True,
+                font_size=0.5,
+                color=_color(class_rgba(label)),
+                text=f"{label or '?'} #{area['id']}",
+            )
+        )
+    entity = fg.SceneEntity(timestamp=when, frame_id=frame_id, id="areas", texts=texts)
+    return fg.SceneUpdate(entities=[entity])

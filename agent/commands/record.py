@@ -1,0 +1,125 @@
+"""``loci record``: record every sample of a robot's keys into an MCAP file.
+
+A standalone recorder process: it joins the bus as a peer (connecting to the agent's
+endpoint), subscribes ``loci/<robot>/**`` and writes each sample with its schema, until
+Ctrl-C, SIGTERM or ``--duration``. The file opens in Foxglove.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import signal
+import sys
+from typing import Any
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
+    return value
+
+
+def register(subparsers: Any) -> None:
+    from agent.bus.session import DEFAULT_AGENT_ENDPOINT
+
+    p = subparsers.add_parser(
+        "record",
+        help="record a robot's bus traffic into an MCAP file (opens in Foxglove)",
+        description=(
+            "Join the Zenoh bus, subscribe to every key of the robot (loci/ROBOT/**) and write each "
+            "sample with its schema into an MCAP file: laser scans, poses, images and scene updates as "
+            "Foxglove protobuf, the rest as JSON with a JSON Schema. Runs until Ctrl-C, SIGTERM or "
+            "--duration; the file is flushed every second, so even a killed recorder leaves a "
+            "readable file (loci replay reads it up to the last complete chunk)."
+        ),
+        epilog=f"Example: loci record run1.mcap --robot rosie --connect {DEFAULT_AGENT_ENDPOINT} --duration 60",
+    )
+    p.add_argument("output", metavar="OUT.mcap", help="the recording to write")
+    p.add_argument(
+        "--robot", help="the robot's name, the second chunk of its keys (default: this host's name)"
+    )
+    p.add_argument(
+        "--connect",
+        metavar="ENDPOINT",
+        action="append",
+        help=f"a Zenoh endpoint to connect to, repeatable (default: {DEFAULT_AGENT_ENDPOINT}, the agent's)",
+    )
+    p.add_argument(
+        "--listen",
+        metavar="ENDPOINT",
+        action="append",
+        help="an endpoint to accept connections on, repeatable (default: tcp/127.0.0.1:0, a free port)",
+    )
+    p.add_argument(
+        "--mode", choices=("peer", "client"), default="peer", help="peer (default) or client of a router"
+    )
+    p.add_argument(
+        "--duration", type=_positive, metavar="S", help="stop after S seconds (default: until Ctrl-C)"
+    )
+    p.add_argument(
+        "--flush",
+        type=_positive,
+        default=1.0,
+        metavar="S",
+        help="flush to the file every S seconds (default: 1)",
+    )
+    p.add_argument("--force", action="store_true", help="overwrite OUT.mcap if it exists")
+    p.set_defaults(handler=_record)
+
+
+def _record(args: argparse.Namespace) -> int:
+    from agent.bus.keys import robot_name
+    from agent.bus.session import DEFAULT_AGENT_ENDPOINT, BusConfig
+
+    robot = robot_name(args.robot)
+    if args.mode == "client":
+        listen: tuple[str, ...] = tuple(args.listen or ())
+    else:
+        listen = tuple(args.listen or ("tcp/127.0.0.1:0",))
+    config = BusConfig(
+        mode=args.mode, listen=listen, connect=tuple(args.connect or (DEFAULT_AGENT_ENDPOINT,))
+    )
+    return asyncio.run(_run(args, robot, config))
+
+
+async def _run(args: argparse.Namespace, robot: str, config: Any) -> int:
+    from agent.bus.keys import robot_wildcard
+    from agent.bus.session import bus_session
+    from agent.recording.recorder import McapSink, Recorder, recording_metadata
+
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    key = robot_wildcard(robot)
+    sink = McapSink(args.output, overwrite=args.force, metadata=recording_metadata(robot, key=key))
+    try:
+        with bus_session(config) as session:
+            recorder = Recorder(session, sink, key, flush_interval=args.flush)
+            task = asyncio.create_task(recorder.run())
+            print(
+                f"recording {key} into {args.output} (connect {', '.join(config.connect)}); Ctrl-C to stop",
+                file=sys.stderr,
+                flush=True,
+            )
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(stop.wait(), args.duration)
+            recorder.stop()
+            await task
+            stats = recorder.stats
+    finally:
+        sink.close()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
+    print(
+        f"recorded {sink.messages} messages into {args.output} "
+        f"({stats['dropped']} dropped, {stats['invalid']} invalid)",
+        file=sys.stderr,
+    )
+    return 0

@@ -1,0 +1,78 @@
+"""State queryables: answers from the current state, errors as answers, and a get() that returns."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import pytest
+
+from agent.bus.keys import RobotKeys
+from agent.bus.queryable import StateCell, StateQueryable, query_state
+from agent.bus.testing import session_pair, settle
+from knowledge.errors import ProtocolError
+
+KEYS = RobotKeys("rosie")
+
+
+def _graph(n: int) -> dict[str, Any]:
+    return {
+        "schema": "loci.graph/1",
+        "stamp": 10.0 + n,
+        "nodes": [{"id": i, "x": float(i), "y": 0.0, "kind": "place", "label": "corridor"} for i in range(n)],
+        "edges": [[i, i + 1] for i in range(n - 1)],
+    }
+
+
+def test_a_query_gets_the_current_state_at_once() -> None:
+    cell = StateCell("loci.graph/1")
+    with session_pair() as (a, b), StateQueryable(a, KEYS.state("graph"), cell) as q:
+        settle(b, a)
+        (reply,) = query_state(b, KEYS.state("graph"), timeout=5.0)
+        assert reply.value is None and reply.error == "no state yet"
+        cell.set(_graph(3))
+        t0 = time.monotonic()
+        (reply,) = query_state(b, KEYS.state("graph"), timeout=5.0)
+        elapsed = time.monotonic() - t0
+        cell.set(_graph(5))
+        (later,) = query_state(b, "loci/rosie/state/**", timeout=5.0)
+        assert q.queries == 3
+    assert reply.key == "loci/rosie/state/graph" and reply.value == _graph(3)
+    assert later.value == _graph(5)
+    assert elapsed < 2.5  # finished queries return with their replies, not after the 5 s timeout
+
+
+def test_a_failing_source_answers_with_an_error_and_keeps_serving() -> None:
+    calls = {"n": 0}
+
+    def flaky() -> dict[str, Any]:
+        calls["n"] += 1
+        if calls["n"] == 1:
+            raise RuntimeError("graph is being rebuilt")
+        return {"schema": "loci.place/1", "stamp": 1.0, "label": "room", "probabilities": {"room": 1.0}}
+
+    with session_pair() as (a, b), StateQueryable(a, KEYS.state("place"), flaky, "loci.place/1"):
+        settle(b, a)
+        t0 = time.monotonic()
+        (first,) = query_state(b, KEYS.state("place"), timeout=5.0)
+        (second,) = query_state(b, KEYS.state("place"), timeout=5.0)
+        elapsed = time.monotonic() - t0
+    assert first.value is None and first.error is not None and "graph is being rebuilt" in first.error
+    assert second.value is not None and second.value["label"] == "room"
+    assert elapsed < 4.0
+
+
+def test_a_state_that_does_not_validate_is_refused_when_set() -> None:
+    cell = StateCell("loci.areas/1")
+    with pytest.raises(ProtocolError, match="areas"):
+        cell.set({"schema": "loci.areas/1", "stamp": 0.0, "areas": [{"id": 0, "label": "room", "nodes": []}]})
+    assert cell() is None
+    with pytest.raises(ValueError, match="schema_id"):
+        StateQueryable.__init__(object.__new__(StateQueryable), None, "k", lambda: None)  # type: ignore[arg-type]
+
+
+def test_nobody_answering_returns_empty_after_the_timeout() -> None:
+    with session_pair() as (_, b):
+        t0 = time.monotonic()
+        assert query_state(b, "loci/nobody/state/**", timeout=0.3) == []
+        assert time.monotonic() - t0 < 3.0

@@ -1,0 +1,131 @@
+"""JSON messages: validation on receipt with clear reasons, and the JSON Schema documents."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import pytest
+
+from agent.bus.codecs import json_codec
+from agent.bus.schemas import SCHEMAS, MessageSchema, SchemaRegistry, integer, obj
+from knowledge.errors import ProtocolError
+
+
+def _place(**over: Any) -> dict[str, Any]:
+    msg = {
+        "schema": "loci.place/1",
+        "stamp": 1.5,
+        "label": "corridor",
+        "probabilities": {"room": 0.2, "corridor": 0.8},
+        "node": 3,
+    }
+    msg.update(over)
+    return msg
+
+
+def _graph() -> dict[str, Any]:
+    return {
+        "schema": "loci.graph/1",
+        "stamp": 2.0,
+        "nodes": [
+            {"id": 0, "x": 0.0, "y": 0.0, "kind": "place", "label": "room"},
+            {
+                "id": 1,
+                "x": 1.0,
+                "y": 0.0,
+                "kind": "doorway",
+                "label": None,
+                "width": 0.9,
+                "orientation": 1.57,
+            },
+        ],
+        "edges": [[0, 1]],
+    }
+
+
+def test_valid_messages_round_trip() -> None:
+    codec = json_codec("loci.place/1")
+    assert codec.decode(codec.encode(_place())) == _place()
+    graph = json_codec("loci.graph/1")
+    assert graph.decode(graph.encode(_graph())) == _graph()
+    areas = {"schema": "loci.areas/1", "stamp": 0, "areas": [{"id": 0, "label": "room", "nodes": [0, 1]}]}
+    assert SCHEMAS.decode(json.dumps(areas).encode()) == areas
+
+
+@pytest.mark.parametrize(
+    ("payload", "reason"),
+    [
+        (b"{not json", "not valid JSON"),
+        (b'{"schema": "loci.place/1", "stamp": NaN}', "NaN"),
+        (b"[1, 2]", "JSON object"),
+        (b'{"stamp": 1}', "'schema' string"),
+        (json.dumps(_place(schema="loci.graph/1")).encode(), "expected a loci.place/1"),
+        (
+            json.dumps({k: v for k, v in _place().items() if k != "label"}).encode(),
+            "missing required field 'label'",
+        ),
+        (json.dumps(_place(label=3)).encode(), r"loci.place/1.label: expected a string"),
+        (json.dumps(_place(probabilities={"room": 1.5})).encode(), r"probabilities.room: 1.5 is above"),
+        (json.dumps(_place(node=True)).encode(), "node: expected an integer, got a boolean"),
+        (json.dumps(_place(node=-1)).encode(), "below the minimum"),
+        (json.dumps(_place(stamp="now")).encode(), "stamp: expected a number"),
+        (b"\xff\xfe", "not valid JSON"),
+    ],
+)
+def test_malformed_messages_say_what_is_wrong(payload: bytes, reason: str) -> None:
+    with pytest.raises(ProtocolError, match=reason):
+        SCHEMAS.decode(payload, "loci.place/1")
+
+
+def test_unknown_schemas_are_named() -> None:
+    with pytest.raises(
+        ProtocolError, match=r"unknown message schema 'loci.nothing/1' \(known: .*loci.place/1"
+    ):
+        SCHEMAS.decode(json.dumps(_place(schema="loci.nothing/1")).encode())
+
+
+def test_graph_cross_checks() -> None:
+    bad = _graph()
+    bad["edges"].append([1, 7])
+    with pytest.raises(ProtocolError, match=r"edges\[1\].*not in 'nodes'"):
+        SCHEMAS.validate(bad)
+    dup = _graph()
+    dup["nodes"][1]["id"] = 0
+    dup["edges"] = []
+    with pytest.raises(ProtocolError, match="unique"):
+        SCHEMAS.validate(dup)
+    kind = _graph()
+    kind["nodes"][0]["kind"] = "kitchen"
+    with pytest.raises(ProtocolError, match=r"nodes\[0\].kind: 'kitchen' is not one of place, doorway"):
+        SCHEMAS.validate(kind)
+
+
+def test_encoding_refuses_invalid_messages_and_non_json_values() -> None:
+    with pytest.raises(ProtocolError, match="missing required field"):
+        SCHEMAS.encode({"schema": "loci.place/1"})
+    with pytest.raises(ProtocolError):
+        SCHEMAS.encode(_place(stamp=float("inf")))
+
+
+def test_registry_refuses_a_changed_schema_under_a_known_id() -> None:
+    reg = SchemaRegistry()
+    first = reg.register(MessageSchema("loci.test", 1, obj({"n": integer()})))
+    reg.register(first)  # the same object again is fine
+    with pytest.raises(ValueError, match="bump the version"):
+        reg.register(MessageSchema("loci.test", 1, obj({"n": integer(minimum=0)})))
+    with pytest.raises(ValueError, match="must look like"):
+        MessageSchema("Loci.Test", 1, obj())
+
+
+def test_json_schema_documents_describe_the_fields() -> None:
+    for sid in SCHEMAS.ids():
+        doc = SCHEMAS.get(sid).json_schema()
+        assert doc["$id"] == sid and doc["type"] == "object"
+        assert doc["properties"]["schema"] == {"const": sid}
+        assert "schema" in doc["required"]
+        json.dumps(doc)  # plain JSON
+    place = SCHEMAS.get("loci.place/1").json_schema()
+    assert set(place["required"]) == {"schema", "stamp", "label", "probabilities"}
+    assert place["properties"]["node"]["type"] == ["integer", "null"]
+    assert place["properties"]["probabilities"]["additionalProperties"]["maximum"] == 1

@@ -515,14 +515,17 @@ class VirtualLMS:
             result, new_baud = MODE_SWITCH_OK, MODE_BAUDS[mode]
         else:
             result = MODE_SWITCH_NOT_POSSIBLE
-        self._reply(tg.mode_reply(result))
-        with self._lock:
-            if new_baud is not None:
-                self._baud = new_baud
-            elif result == MODE_SWITCH_OK:
+        if new_baud is None and result == MODE_SWITCH_OK:
+            # the new mode holds once the host has the reply (state() must not lag behind it)
+            with self._lock:
                 if mode == Mode.CONTINUOUS and self._mode != Mode.CONTINUOUS:
                     self._next_scan = time.monotonic()
                 self._mode = mode
+        self._reply(tg.mode_reply(result))
+        if new_baud is not None:
+            # the reply goes out at the old rate, then the scanner changes
+            with self._lock:
+                self._baud = new_baud
 
     def _status(self) -> tg.ScannerStatus:
         return tg.ScannerStatus(

@@ -61,6 +61,40 @@ def test_recordings_and_labels(legs_dir: Path) -> None:
     assert negs.n_positive == 0 and negs.n_negative > 50
 
 
+def test_error_codes_are_no_returns_as_for_the_labels(legs_dir: Path) -> None:
+    """The laser reports errors as ranges of 6-15 mm. leg_tracker, which made the labels,
+    dropped them (below the scans' range_min): no label lies at the laser, and with
+    LEGS_RANGE_MIN our segments reproduce more of the labelled legs than with the codes as points."""
+    from dataclasses import replace
+
+    rec = ds.load_recording(legs_dir / "positive_6_extracted.training_scan.npz")
+    assert rec.range_min == ds.LEGS_RANGE_MIN
+    r = rec.ranges[:40]
+    codes = (r > 0) & (r < ds.LEGS_RANGE_MIN)
+    assert codes.sum() > 40 * 10  # dozens per scan
+    assert rec.legs is not None and np.hypot(rec.legs[:, 1], rec.legs[:, 2]).min() > 0.1
+
+    def matched(recording: ds.LegsRecording) -> tuple[int, int, np.ndarray]:
+        legs = hits = 0
+        sizes = []
+        for k, seg, _ in ds.iter_scan_features(recording, 0, 40):
+            _, counts = ds.label_segments(recording, k, seg.centroids(), seg.sizes)
+            legs += counts["legs"]
+            hits += counts["legs_matched"]
+            sizes.append(np.hypot(*seg.centroids().T))
+        return legs, hits, np.concatenate(sizes)
+
+    legs, with_min, dist = matched(rec)
+    _, without, dist0 = matched(replace(rec, range_min=0.0))
+    assert with_min >= 0.9 * legs and with_min > without
+    assert (dist0 < 0.02).sum() > 40 and (dist < 0.02).sum() == 0  # no segments at the laser
+
+
+def test_examples_carry_the_distance_for_max_range(legs_dir: Path) -> None:
+    ex = ds.build_examples(legs_dir, [ds.Part("negative_2.left_scan.npz", 0, 5)])
+    assert ex.distance.shape == ex.y.shape and (ex.distance > 0).all() and ex.distance.max() > 5.0
+
+
 def test_missing_data_is_a_clear_error(tmp_path: Path) -> None:
     with pytest.raises(ds.DataError, match="--data"):
         ds.find_legs_dir(tmp_path)

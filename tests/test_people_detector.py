@@ -14,7 +14,7 @@ from drivers.sim.lms_world import Leg, LmsWorld
 from knowledge.errors import ModelError, NotFittedError
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.people.detector import DEFAULT_MODEL, FORMAT, LegDetector
-from knowledge.people.features import N_FEATURES, STATIC_COLUMNS, segment_features
+from knowledge.people.features import DEFAULT_COLUMNS, FEATURE_CODES, N_FEATURES, segment_features
 from knowledge.people.segmentation import segment_scan
 
 N_BEAMS = 768
@@ -100,8 +100,14 @@ def test_save_load_round_trip(trained: LegDetector, tmp_path: Path) -> None:
     with np.load(path, allow_pickle=False) as z:
         header = json.loads(z["header_json"].tobytes().decode())
     assert header["format"] == FORMAT
-    assert header["features"] == [f"C.{i + 1}" for i in STATIC_COLUMNS]
+    assert header["features"] == [FEATURE_CODES[i] for i in DEFAULT_COLUMNS]
+    assert (
+        "C.4" not in header["features"]
+        and "C.5" not in header["features"]
+        and "C.14" not in header["features"]
+    )
     assert header["detector"]["jump"] == 0.15
+    assert header["detector"]["max_range"] is None
     assert header["training"]["source"] == "synthetic"
     back = LegDetector.load(path)
     X, _ = synthetic_examples(3, seed=3)
@@ -130,8 +136,10 @@ def test_broken_model_files_raise_model_error(trained: LegDetector, tmp_path: Pa
         np.savez(p, **a)
         return p
 
+    with pytest.raises(ModelError, match="retrain"):  # /1 measured C.4/C.5 across no-return beams
+        LegDetector.load(write("v1.npz", {**header, "format": "loci.people-model/1"}))
     with pytest.raises(ModelError, match="format"):
-        LegDetector.load(write("v2.npz", {**header, "format": "loci.people-model/2"}))
+        LegDetector.load(write("v3.npz", {**header, "format": "loci.people-model/3"}))
     with pytest.raises(ModelError, match="not a genius-loci people model"):
         LegDetector.load(write("place.npz", {**header, "format": "loci.place-model/1"}))
     with pytest.raises(ModelError, match="unknown features"):
@@ -161,8 +169,9 @@ def test_bundled_model() -> None:
     assert det.booster_.n_rounds_ == 100
     assert det.booster_.booster_type == "generalized"
     assert set(det.booster_.weak_kind_.tolist()) == {0}  # threshold learners only
-    assert det.columns == STATIC_COLUMNS
+    assert det.columns == DEFAULT_COLUMNS
     assert det.jump == 0.15
+    assert det.max_range == 5.0
     assert det.training_["protocol"] == "train"
     assert det.training_["command"].startswith("loci people train")
     top = det.top_features(5)
@@ -170,3 +179,52 @@ def test_bundled_model() -> None:
     assert [f["importance"] for f in top] == sorted((f["importance"] for f in top), reverse=True)
     learners = det.top_learners(5)
     assert [f["alpha"] for f in learners] == sorted((f["alpha"] for f in learners), reverse=True)
+
+
+def test_max_range_makes_far_segments_non_persons(trained: LegDetector, tmp_path: Path) -> None:
+    grid = room()
+    pose = (5.0, 5.0, 0.0)
+    near, far = Leg((7.0, 5.5), 0.06), Leg((8.0, 3.0), 0.06)  # 2.06 m and 3.61 m from the laser
+    world = LmsWorld(grid, pose, [near, far], noise_std=0.0)
+    r = world.ranges(0.0, n_beams=N_BEAMS, fov=FOV, max_range=RMAX, angle_min=ANGLE_MIN)
+    unlimited = trained.detect(r, ANGLE_MIN, INC, range_max=RMAX)
+    np.testing.assert_allclose(sorted(np.hypot(*unlimited.legs.T)), [2.06, 3.61], atol=0.08)  # near surface
+    limited = LegDetector.load(trained.save(tmp_path / "short.npz"))
+    limited.max_range = 3.0
+    det = limited.detect(r, ANGLE_MIN, INC, range_max=RMAX)
+    assert det.legs.shape == (1, 2)
+    np.testing.assert_allclose(det.legs[0], [2.0, 0.5], atol=0.08)
+    far_segment = int(np.argmin(np.hypot(*(det.segmentation.centroids() - [3.0, -2.0]).T)))
+    assert (
+        det.score[far_segment] == -np.inf
+        and not det.beam_labels[det.segmentation.segment_beams(far_segment)].any()
+    )
+    # predict() applies the same limit when it is given the distances, and C.1 < min_points
+    X = det.features
+    dist = np.hypot(*det.segmentation.centroids().T)
+    np.testing.assert_array_equal(limited.predict(X, dist), det.is_person)
+    assert limited.predict(X).sum() == 2  # without distances only the size rule applies
+    assert not limited.classifies([1, 5], [1.0, 3.5]).any() and limited.classifies([2], [2.9]).all()
+    with pytest.raises(ValueError, match="max_range"):
+        LegDetector(max_range=0.0).fit(X, np.arange(len(X)) % 2 == 0)
+    # the limit is part of the model file
+    limited.max_range = 3.0
+    assert LegDetector.load(limited.save(tmp_path / "limited.npz")).max_range == 3.0
+
+
+def test_error_codes_below_range_min_are_no_returns(trained: LegDetector) -> None:
+    """A Hokuyo reports errors as ranges of a few millimetres; with the sensor's range_min the
+    detector skips them, without it they are points at the laser that cut the leg."""
+    grid = room()
+    world = LmsWorld(grid, (5.0, 5.0, 0.0), [Leg((7.0, 5.5), 0.06)], noise_std=0.0)
+    r = world.ranges(0.0, n_beams=N_BEAMS, fov=FOV, max_range=RMAX, angle_min=ANGLE_MIN)
+    clean = trained.detect(r, ANGLE_MIN, INC, range_max=RMAX)
+    (leg,) = np.flatnonzero(clean.is_person)
+    beams = clean.segmentation.segment_beams(int(leg))
+    dirty = r.copy()
+    dirty[beams[len(beams) // 2]] = 0.009  # an error code in the middle of the leg
+    dirty[beams[0] - 1] = 0.006  # and one at its edge
+    ok = trained.detect(dirty, ANGLE_MIN, INC, range_max=RMAX, range_min=0.02)
+    np.testing.assert_allclose(ok.legs, clean.legs, atol=0.01)
+    cut = trained.detect(dirty, ANGLE_MIN, INC, range_max=RMAX)  # range_min = 0: the codes are points
+    assert cut.segmentation.n_segments > clean.segmentation.n_segments

@@ -197,6 +197,28 @@ def test_jump_distances_to_neighbouring_segments() -> None:
     assert f[2, col["C.4"]] == pytest.approx(math.dist(P[9], P[10]))
 
 
+@pytest.mark.parametrize("no_return", [0.0, np.inf, RMAX, 0.008])
+def test_jump_beside_a_beam_without_return_is_the_jump_to_open_space(no_return: float) -> None:
+    # two objects at 2 m, 13 beams apart (23 cm): between them the beams see nothing
+    r = np.array([2.0] * 5 + [no_return] * 12 + [2.0] * 5 + [2.4] * 3)
+    seg = segment_scan(r, 0.0, INC, range_max=RMAX, range_min=0.02)
+    assert seg.sizes.tolist() == [5, 5, 3]
+    f = segment_features(seg, range_max=RMAX, range_min=0.02)
+    P = seg.points
+
+    def at_range_max(beam: int) -> np.ndarray:
+        return RMAX * np.array([math.cos(beam * INC), math.sin(beam * INC)])
+
+    # the beam after the first object has no return: the jump is to its end point at range_max
+    assert f[0, col["C.5"]] == pytest.approx(math.dist(P[4], at_range_max(5)))
+    assert f[1, col["C.4"]] == pytest.approx(math.dist(P[5], at_range_max(16)))
+    assert f[0, col["C.5"]] > RMAX - 2.0 - 1e-9  # not the 0.23 m to the next object
+    # a neighbouring beam with a return is the neighbouring segment's end point (eq. C.4/C.5)
+    assert f[1, col["C.5"]] == pytest.approx(math.dist(P[9], P[10]))
+    assert f[2, col["C.4"]] == pytest.approx(math.dist(P[9], P[10]))
+    assert f[0, col["C.4"]] == RMAX and f[2, col["C.5"]] == RMAX  # the ends of the scan
+
+
 def test_mean_speed_between_two_scans() -> None:
     prev = np.array([2.0] * 5 + [5.0] * 5)
     cur = np.array([1.9] * 5 + [5.0, 5.0, 0.0, 5.0, 5.0])  # a no-return beam in the second segment

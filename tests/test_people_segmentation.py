@@ -57,6 +57,18 @@ def test_no_return_beams_belong_to_no_segment(bad: float) -> None:
     assert segment_scan(r, 0.0, INC, range_max=8.0, max_gap=1).n_segments == 1
 
 
+def test_readings_below_range_min_are_no_returns() -> None:
+    # a Hokuyo reports errors as ranges of a few millimetres (the legs data has 6-15 mm)
+    r = np.array([2.0, 2.0, 0.006, 2.0, 2.0, 0.009, 0.009, 2.0])
+    assert has_return(r, 8.0, 0.02).tolist() == [True, True, False, True, True, False, False, True]
+    seg = segment_scan(r, 0.0, INC, range_max=8.0, range_min=0.02)
+    assert seg.n_segments == 1 and seg.n_points == 5
+    # taken as returns, the error codes are points at the laser that cut the object
+    raw = segment_scan(r, 0.0, INC, range_max=8.0)
+    assert raw.sizes.tolist() == [2, 1, 2, 2, 1]
+    assert np.hypot(*raw.centroids()[1]) < 0.01
+
+
 def test_points_far_apart_across_a_gap_are_split() -> None:
     r = np.array([2.0, 2.0] + [0.0] * 20 + [2.0, 2.0])  # 20 beams ≈ 0.7 m apart at 2 m
     seg = segment_scan(r, 0.0, INC, range_max=8.0)
@@ -92,6 +104,8 @@ def test_beam_mask_labels_the_beams_of_flagged_segments() -> None:
         ({"jump": float("nan")}, "jump"),
         ({"range_max": 0.0}, "range_max"),
         ({"max_gap": -1}, "max_gap"),
+        ({"range_min": -0.1}, "range_min"),
+        ({"range_min": 8.0}, "range_min"),
     ],
 )
 def test_bad_arguments_say_what_to_do(kwargs: dict[str, float], match: str) -> None:

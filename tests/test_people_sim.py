@@ -148,3 +148,31 @@ def test_bundled_detector_finds_simulated_people_in_virtual_lms_scans() -> None:
     assert false_per_scan <= 1.0
     # and the tracker followed both for the last scans
     assert len(frame.tracks) >= 2
+
+
+def test_pipeline_takes_range_min_from_the_laser_scan() -> None:
+    """Error codes below the scan's range_min (a Hokuyo's few millimetres) are no returns."""
+    from drivers.messages import LaserScan
+
+    grid = room()
+    pose = (5.0, 5.0, 0.0)
+    people = [SimPerson([(7.0, 5.0), (7.0, 5.01)], 0.0)]
+    world = LmsWorld(grid, pose, legs_of(people), noise_std=0.0, seed=0)
+    r = world.ranges(0.0, n_beams=N_BEAMS, fov=FOV, max_range=RMAX, angle_min=ANGLE_MIN)
+    clean = PeoplePipeline(LegDetector.load()).process(
+        r, 0.0, angle_min=ANGLE_MIN, angle_increment=INC, range_max=RMAX
+    )
+    assert len(clean.legs) >= 1
+    dirty = r.copy()
+    for seg in np.flatnonzero(clean.detection.is_person):
+        beams = clean.detection.segmentation.segment_beams(int(seg))
+        dirty[beams[::3]] = 0.007  # every third beam of each leg is an error code
+    scan = LaserScan(0.0, 0, "laser", ANGLE_MIN, INC, RMAX, dirty.astype(np.float32), range_min=0.02)
+    frame = PeoplePipeline(LegDetector.load()).process_scan(scan)
+    assert frame.legs.shape == clean.legs.shape
+    np.testing.assert_allclose(frame.legs, clean.legs, atol=0.02)
+    # the same scan without its range_min: the codes are points at the laser, the legs are cut up
+    raw = PeoplePipeline(LegDetector.load()).process(
+        dirty, 0.0, angle_min=ANGLE_MIN, angle_increment=INC, range_max=RMAX
+    )
+    assert raw.detection.segmentation.n_segments > frame.detection.segmentation.n_segments

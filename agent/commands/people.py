@@ -98,7 +98,21 @@ def register(subparsers: Any) -> None:
         help="also use C.14 (mean speed between consecutive scans); off by default, see docs/people.md",
     )
     tr.add_argument(
+        "--jumps",
+        action="store_true",
+        help="also use C.4/C.5 (jump distances to the neighbouring beams); off by default: in the legs data "
+        "they learn the empty space the labelled people stand in, see docs/people.md",
+    )
+    tr.add_argument(
         "--jump", type=_positive_float, default=0.15, help="jump distance in metres (default: 0.15)"
+    )
+    tr.add_argument(
+        "--max-range",
+        type=_positive_float,
+        default=5.0,
+        metavar="M",
+        help="the detector never calls a segment whose centroid is farther than M metres a person "
+        "(default: 5, the reach of the data's labels; a large value means no limit)",
     )
     tr.set_defaults(handler=_train)
 
@@ -139,7 +153,7 @@ def _examples(args: argparse.Namespace, split: str, jump: float, max_gap: int | 
 
 def _train(args: argparse.Namespace) -> int:
     from knowledge.people.detector import LegDetector
-    from knowledge.people.features import ALL_COLUMNS, FEATURE_CODES, STATIC_COLUMNS
+    from knowledge.people.features import DEFAULT_COLUMNS, FEATURE_CODES, JUMP_COLUMNS, MOTION_COLUMN
 
     _, ex = _examples(args, "train", args.jump)
     if ex.n_positive == 0 or ex.n_negative == 0:
@@ -149,7 +163,11 @@ def _train(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 2
-    columns = ALL_COLUMNS if args.motion else STATIC_COLUMNS
+    columns = sorted(
+        set(DEFAULT_COLUMNS)
+        | (set(JUMP_COLUMNS) if args.jumps else set())
+        | ({MOTION_COLUMN} if args.motion else set())
+    )
     training = {
         "protocol": "train",
         "files": [[p.file, p.first, p.stop] for p in ex.parts],
@@ -158,11 +176,14 @@ def _train(args: argparse.Namespace) -> int:
         "diagnostics": dict(ex.diagnostics),
         "command": "loci people train"
         + (" --motion" if args.motion else "")
+        + (" --jumps" if args.jumps else "")
         + (f" --rounds {args.rounds}" if args.rounds != 100 else "")
+        + (f" --jump {args.jump:g}" if args.jump != 0.15 else "")
+        + (f" --max-range {args.max_range:g}" if args.max_range != 5.0 else "")
         + (f" --max-scans {args.max_scans}" if args.max_scans else ""),
     }
     t0 = time.perf_counter()
-    det = LegDetector(n_rounds=args.rounds, columns=columns, jump=args.jump).fit(
+    det = LegDetector(n_rounds=args.rounds, columns=columns, jump=args.jump, max_range=args.max_range).fit(
         ex.X, ex.y, training=training
     )
     seconds = time.perf_counter() - t0

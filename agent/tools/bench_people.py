@@ -33,8 +33,9 @@ ANGLE_MIN = -2.356194496154785
 RANGE_MAX = 11.0
 
 
-def real_scans(data: Path, n: int) -> tuple[np.ndarray, float, float, float, str] | None:
-    """Up to ``n`` scans ``(n, B)`` of the legs data's test split and their geometry, or None."""
+def real_scans(data: Path, n: int) -> tuple[np.ndarray, float, float, float, float, str] | None:
+    """Up to ``n`` scans ``(n, B)`` of the legs data's test split and their geometry
+    (angle_min, angle_increment, range_max, range_min), or None."""
     from knowledge.people import dataset as ds
 
     try:
@@ -55,11 +56,12 @@ def real_scans(data: Path, n: int) -> tuple[np.ndarray, float, float, float, str
         r0.angle_min,
         r0.angle_increment,
         r0.range_max,
+        r0.range_min,
         "legs data (positive_6 + negative_2.rear test scans)",
     )
 
 
-def simulated_scans(n: int, seed: int = 0) -> tuple[np.ndarray, float, float, float, str]:
+def simulated_scans(n: int, seed: int = 0) -> tuple[np.ndarray, float, float, float, float, str]:
     """``n`` scans of three people walking in a 10 m room with a pillar (virtual LMS, 768 beams)."""
     from drivers.sim.lms_world import LmsWorld
     from drivers.sim.people import legs_of, walkers_in
@@ -79,7 +81,7 @@ def simulated_scans(n: int, seed: int = 0) -> tuple[np.ndarray, float, float, fl
             for i in range(n)
         ]
     )
-    return R, ANGLE_MIN, INC, RANGE_MAX, "simulated people in a ray-cast room"
+    return R, ANGLE_MIN, INC, RANGE_MAX, 0.0, "simulated people in a ray-cast room"
 
 
 def _pct(a: np.ndarray, q: float) -> float:
@@ -98,13 +100,13 @@ def run(data: Path | None = None, *, n_scans: int = 600, warmup: int = 20) -> di
     if n_scans < 1:
         raise ValueError("n_scans must be >= 1")
     src = real_scans(data, n_scans) if data is not None else None
-    R, amin, inc, rmax, source = src if src is not None else simulated_scans(n_scans)
+    R, amin, inc, rmax, rmin, source = src if src is not None else simulated_scans(n_scans)
     det = LegDetector.load()
     period = 1.0 / RATE_HZ
 
     pipe = PeoplePipeline(det)
     for i in range(min(warmup, n_scans)):
-        pipe.process(R[i], i * period, angle_min=amin, angle_increment=inc, range_max=rmax)
+        pipe.process(R[i], i * period, angle_min=amin, angle_increment=inc, range_max=rmax, range_min=rmin)
     pipe = PeoplePipeline(det)
     total = np.empty(n_scans)
     n_segments = np.empty(n_scans)
@@ -112,7 +114,9 @@ def run(data: Path | None = None, *, n_scans: int = 600, warmup: int = 20) -> di
     cpu0 = time.process_time()
     for i in range(n_scans):
         t0 = time.perf_counter()
-        frame = pipe.process(R[i], i * period, angle_min=amin, angle_increment=inc, range_max=rmax)
+        frame = pipe.process(
+            R[i], i * period, angle_min=amin, angle_increment=inc, range_max=rmax, range_min=rmin
+        )
         total[i] = time.perf_counter() - t0
         n_segments[i] = frame.detection.segmentation.n_segments
         n_legs[i] = frame.legs.shape[0]
@@ -123,10 +127,12 @@ def run(data: Path | None = None, *, n_scans: int = 600, warmup: int = 20) -> di
     cols = list(det.columns)
     for i in range(n_scans):
         t0 = time.perf_counter()
-        seg = segment_scan(R[i], amin, inc, range_max=rmax, jump=det.jump, max_gap=det.max_gap)
-        X = segment_features(seg, range_max=rmax)
+        seg = segment_scan(
+            R[i], amin, inc, range_max=rmax, range_min=rmin, jump=det.jump, max_gap=det.max_gap
+        )
+        X = segment_features(seg, range_max=rmax, range_min=rmin)
         t1 = time.perf_counter()
-        big = seg.sizes >= det.min_points
+        big = det.classifies(seg.sizes, np.hypot(*seg.centroids().T))
         score = det.booster_.decision_function(X[big][:, cols]) if big.any() else np.zeros(0)
         legs = seg.centroids()[big][score >= det.threshold]
         t2 = time.perf_counter()

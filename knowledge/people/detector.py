@@ -2,16 +2,20 @@
 
 :class:`LegDetector` classifies every segment of a scan with at least ``min_points`` points
 as *person* (a leg, or both legs seen as one segment) or *non-person*, from the features it
-was trained on (by default C.1–C.13, the static ones; C.14 needs consecutive scans), with
+was trained on (by default the shape features C.1–C.3 and C.6–C.13: not C.14, which needs
+consecutive scans, nor the jump distances C.4/C.5, see :data:`~knowledge.people.features.DEFAULT_COLUMNS`), with
 ``T = 100`` threshold weak learners (eq. 8.1) boosted by the generalized AdaBoost of Sect. 4.2
 (:class:`~knowledge.places.boosting.GeneralizedAdaBoost`). A segment is a person when
 ``F(x) ≥ threshold`` (0 by default, the sign of the strong classifier); every beam of a person
-segment is labelled person, all other beams non-person.
+segment is labelled person, all other beams non-person. A detector may have a ``max_range``:
+segments whose centroid is farther from the sensor are never persons (the bundled model's
+training data has people only up to 5 m, so it does not claim any beyond).
 
 It follows the estimator manners of the places boosters: ``__init__`` stores parameters,
 :meth:`LegDetector.fit` returns ``self``, an unfitted detector raises NotFittedError.
 
-File format ``loci.people-model/1``: one ``.npz`` holding a JSON header as a uint8 array
+File format ``loci.people-model/2`` (``/1`` models measured C.4/C.5 across no-return beams
+and are refused): one ``.npz`` holding a JSON header as a uint8 array
 ``header_json`` and the booster's arrays as ``booster.<name>``; written atomically and read
 with ``allow_pickle=False``; every problem on loading is a :class:`ModelError`.
 """
@@ -36,17 +40,17 @@ import numpy.typing as npt
 from knowledge.errors import ModelError, NotFittedError
 from knowledge.fileio import atomic_write_bytes
 from knowledge.people.features import (
+    DEFAULT_COLUMNS,
     FEATURE_CODES,
     FEATURES,
     N_FEATURES,
-    STATIC_COLUMNS,
     feature_label,
     segment_features,
 )
 from knowledge.people.segmentation import DEFAULT_JUMP, FloatArray, Segmentation, segment_scan
 from knowledge.places.boosting import STATE_ARRAYS, GeneralizedAdaBoost, booster_from_state
 
-FORMAT = "loci.people-model/1"
+FORMAT = "loci.people-model/2"
 FORMAT_FAMILY = "loci.people-model/"
 HEADER_KEY = "header_json"
 BOOSTER_PREFIX = "booster."
@@ -68,8 +72,8 @@ class SegmentDetection:
     Attributes:
         segmentation: the scan's segments.
         features: ``(S, 14)`` float64 features C.1–C.14 (C.14 is 0 without a previous scan).
-        score: ``(S,)`` float64 strong-classifier output ``F``; −inf for segments too small
-            to classify.
+        score: ``(S,)`` float64 strong-classifier output ``F``; −inf for segments the detector
+            does not classify (fewer than ``min_points`` points, or beyond ``max_range``).
         is_person: ``(S,)`` bool, the segment is classified person.
     """
 
@@ -99,7 +103,8 @@ class LegDetector:
 
     Parameters: ``n_rounds`` (T), ``columns`` (feature columns used, indices into
     :data:`~knowledge.people.features.FEATURES`), ``jump`` and ``max_gap`` (segmentation),
-    ``min_points`` (smaller segments are never persons), ``threshold`` on ``F``.
+    ``min_points`` (smaller segments are never persons), ``max_range`` (metres or None;
+    segments whose centroid is farther are never persons), ``threshold`` on ``F``.
 
     Fitted: ``booster_`` (a :class:`GeneralizedAdaBoost` over the ``columns``), and
     ``training_`` (a JSON-able summary that is saved with the model).
@@ -109,10 +114,11 @@ class LegDetector:
         self,
         n_rounds: int = 100,
         *,
-        columns: Sequence[int] = STATIC_COLUMNS,
+        columns: Sequence[int] = DEFAULT_COLUMNS,
         jump: float = DEFAULT_JUMP,
         max_gap: int | None = None,
         min_points: int = 2,
+        max_range: float | None = None,
         threshold: float = 0.0,
     ) -> None:
         self.n_rounds = n_rounds
@@ -120,6 +126,7 @@ class LegDetector:
         self.jump = jump
         self.max_gap = max_gap
         self.min_points = min_points
+        self.max_range = max_range
         self.threshold = threshold
 
     def _check_params(self) -> None:
@@ -130,6 +137,8 @@ class LegDetector:
             raise ValueError(f"feature columns must be in 0..{N_FEATURES - 1} (C.1..C.14), got {bad}")
         if int(self.min_points) != self.min_points or self.min_points < 1:
             raise ValueError(f"min_points must be an integer >= 1, got {self.min_points!r}")
+        if self.max_range is not None and not (math.isfinite(self.max_range) and self.max_range > 0):
+            raise ValueError(f"max_range must be None or a positive number of metres, got {self.max_range!r}")
         if not math.isfinite(self.threshold):
             raise ValueError(f"threshold must be finite, got {self.threshold!r}")
 
@@ -140,7 +149,10 @@ class LegDetector:
 
     def __repr__(self) -> str:
         codes = ",".join(FEATURE_CODES[c] for c in self.columns)
-        return f"LegDetector(n_rounds={self.n_rounds}, columns=[{codes}], jump={self.jump}, threshold={self.threshold})"
+        return (
+            f"LegDetector(n_rounds={self.n_rounds}, columns=[{codes}], jump={self.jump}, "
+            f"max_range={self.max_range}, threshold={self.threshold})"
+        )
 
     # -- training / prediction -----------------------------------------------------------
 
@@ -175,9 +187,28 @@ class LegDetector:
             return np.zeros(0)
         return self.booster_.decision_function(A)
 
-    def predict(self, X: npt.ArrayLike) -> npt.NDArray[np.bool_]:
-        """``(n,)`` bool, True = person, for features ``(n, 14)`` (segment sizes are not checked here)."""
-        return self.decision_function(X) >= self.threshold
+    def predict(self, X: npt.ArrayLike, distance: npt.ArrayLike | None = None) -> npt.NDArray[np.bool_]:
+        """``(n,)`` bool, True = person, for features ``(n, 14)``.
+
+        ``distance`` ``(n,)``: the segments' centroid distances in metres; with it, segments
+        beyond ``max_range`` are non-persons, as in :meth:`detect`. Segments with fewer than
+        ``min_points`` points (C.1) are non-persons.
+        """
+        A = np.asarray(X, dtype=np.float64)
+        out = self.decision_function(A) >= self.threshold
+        if A.shape[0]:
+            out &= self.classifies(A[:, 0], distance)
+        return np.asarray(out)
+
+    def classifies(
+        self, n_points: npt.ArrayLike, distance: npt.ArrayLike | None = None
+    ) -> npt.NDArray[np.bool_]:
+        """``(n,)`` bool: segments of ``n_points`` points at ``distance`` metres (if given) that this
+        detector classifies at all; the others are non-persons."""
+        ok = np.asarray(n_points) >= self.min_points
+        if distance is not None and self.max_range is not None:
+            ok = ok & (np.asarray(distance, dtype=np.float64) <= self.max_range)
+        return np.asarray(ok)
 
     def detect(
         self,
@@ -186,20 +217,29 @@ class LegDetector:
         angle_increment: float,
         *,
         range_max: float,
+        range_min: float = 0.0,
         previous: npt.ArrayLike | None = None,
         dt: float | None = None,
     ) -> SegmentDetection:
         """Segment one scan ``(B,)`` (metres), compute the features and classify every segment.
 
-        ``previous``/``dt``: the previous scan of the same sensor and the seconds since, for C.14.
+        ``range_max``/``range_min``: the sensor's range limits in metres (readings outside are
+        no returns). ``previous``/``dt``: the previous scan of the same sensor and the seconds
+        since, for C.14.
         """
         self._check_fitted()
         seg = segment_scan(
-            ranges, angle_min, angle_increment, range_max=range_max, jump=self.jump, max_gap=self.max_gap
+            ranges,
+            angle_min,
+            angle_increment,
+            range_max=range_max,
+            range_min=range_min,
+            jump=self.jump,
+            max_gap=self.max_gap,
         )
-        X = segment_features(seg, range_max=range_max, previous=previous, dt=dt)
+        X = segment_features(seg, range_max=range_max, range_min=range_min, previous=previous, dt=dt)
         score = np.full(seg.n_segments, -np.inf)
-        big = seg.sizes >= self.min_points
+        big = self.classifies(seg.sizes, np.hypot(*seg.centroids().T) if seg.n_segments else None)
         if big.any():
             score[big] = self.booster_.decision_function(X[big][:, list(self.columns)])
         return SegmentDetection(seg, X, score, score >= self.threshold)
@@ -264,6 +304,7 @@ class LegDetector:
                 "jump": float(self.jump),
                 "max_gap": None if self.max_gap is None else int(self.max_gap),
                 "min_points": int(self.min_points),
+                "max_range": None if self.max_range is None else float(self.max_range),
                 "threshold": float(self.threshold),
             },
             "booster": meta,
@@ -366,12 +407,14 @@ def _from_header(p: Path, header: Mapping[str, Any], arrays: Mapping[str, npt.ND
                 f"the booster reads {booster.n_features_in_} features, the header names {len(codes)}"
             )
         max_gap = det.get("max_gap")
+        max_range = det.get("max_range")
         detector = LegDetector(
             n_rounds=int(booster.get_params()["n_rounds"]),
             columns=[FEATURE_CODES.index(c) for c in codes],
             jump=float(det.get("jump", DEFAULT_JUMP)),
             max_gap=None if max_gap is None else int(max_gap),
             min_points=int(det.get("min_points", 2)),
+            max_range=None if max_range is None else float(max_range),
             threshold=float(det.get("threshold", 0.0)),
         )
         detector._check_params()

@@ -133,7 +133,7 @@ class Confusion:
 
 def evaluate(detector: LegDetector, examples: Examples, *, split: str = "test") -> dict[str, Any]:
     """Score ``detector`` on labelled segments: one JSON-able dict (schema ``loci.people-evaluation/1``)."""
-    pred = detector.predict(examples.X) if examples.X.shape[0] else np.zeros(0, dtype=bool)
+    pred = detector.predict(examples.X, examples.distance) if examples.X.shape[0] else np.zeros(0, dtype=bool)
     seg = Confusion.of(examples.y, pred)
     beams = Confusion.of(examples.y, pred, weights=examples.X[:, 0])
     per_file = []
@@ -176,6 +176,7 @@ def evaluate(detector: LegDetector, examples: Examples, *, split: str = "test") 
             "jump": detector.jump,
             "max_gap": detector.max_gap,
             "min_points": detector.min_points,
+            "max_range": detector.max_range,
             "threshold": detector.threshold,
         },
     }
@@ -225,6 +226,16 @@ def format_report(result: dict[str, Any]) -> str:
             f"  {f['file']:<42} people {f['people']:>5} (FN {f['false_negatives']:>4})  "
             f"non-people {f['non_people']:>6} (FP {f['false_positives']:>5})"
         )
+    det = result["detector"]
+    reach = (
+        "no range limit"
+        if det.get("max_range") is None
+        else f"segments beyond {det['max_range']:g} m are non-persons"
+    )
+    lines.append(
+        f"Detector: features {','.join(det['features'])}; T = {det['n_rounds']}; jump {det['jump']:g} m; "
+        f"{reach}; threshold {det['threshold']:g}"
+    )
     d = result["diagnostics"]
     lines.append(
         f"Labels: {d.get('scans', 0)} scans, {d.get('legs', 0)} labelled legs of which {d.get('legs_matched', 0)} have a "

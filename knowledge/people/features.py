@@ -14,10 +14,14 @@ Where the printed formulas leave a choice, this module decides as follows:
   segment's mean bearing (the direction from the sensor to its centre of gravity): the
   feature then does not change when the scan is rotated, and equals the printed one for a
   segment straight ahead of the sensor.
-* C.4/C.5: the distance between this segment's first (last) point and the previous
-  segment's last (next segment's first) point in beam order, across any no-return beams.
-  The first (last) segment of a scan has no neighbour there: the feature is ``range_max``
-  ("nothing beside it").
+* C.4/C.5: the jump at the segment's border, i.e. the distance between its first (last)
+  point and the end point of the beam just before (after) it. When that beam has a return it
+  is the previous segment's last (next segment's first) point, as printed. When it has none,
+  the beam saw nothing up to the sensor's range: its end point is taken at ``range_max``
+  along the beam (the jump to open space; measuring across the gap to whatever segment comes
+  next would make the feature depend on how much of the scan is empty, which differs from
+  laser to laser in the legs data — it was the main cause of missed legs). The first (last)
+  segment of a scan has no beam there: the feature is ``range_max``.
 * C.7: total least squares (perpendicular) line fit; the residual sum of squares is the
   smaller eigenvalue of the points' scatter matrix — the same line as the closed-form Hessian
   fit the book cites.
@@ -74,6 +78,13 @@ MOTION_COLUMN = 13
 #: The static features C.1–C.13 (the book's Tables 8.1–8.4 use only these).
 STATIC_COLUMNS: tuple[int, ...] = tuple(range(13))
 ALL_COLUMNS: tuple[int, ...] = tuple(range(N_FEATURES))
+#: Columns of the jump distances C.4 and C.5, which describe the segment's surroundings.
+JUMP_COLUMNS: tuple[int, ...] = (3, 4)
+#: What the detector uses by default: the static features without the jump distances, i.e.
+#: only the segment's own shape (C.1–C.3, C.6–C.13). In the legs data the jumps say how the
+#: data were collected (labelled people stand in front of empty space) rather than what a leg
+#: looks like; see docs/people.md.
+DEFAULT_COLUMNS: tuple[int, ...] = tuple(c for c in STATIC_COLUMNS if c not in JUMP_COLUMNS)
 
 #: Radius reported for a straight segment (the limit of a circle fit), metres.
 MAX_RADIUS = 100.0
@@ -111,6 +122,7 @@ def segment_features(
     seg: Segmentation,
     *,
     range_max: float,
+    range_min: float = 0.0,
     previous: npt.ArrayLike | None = None,
     dt: float | None = None,
 ) -> FloatArray:
@@ -120,6 +132,8 @@ def segment_features(
         seg: the scan's segmentation.
         range_max: the sensor's maximum range in metres (C.4/C.5 at the scan's ends; beams of
             ``previous`` at or beyond it have no return).
+        range_min: the sensor's minimum range in metres (beams of ``previous`` below it have
+            no return).
         previous: ``(B,)`` ranges in metres of the previous scan of the same sensor, for C.14.
         dt: seconds between the previous scan and this one (> 0), required with ``previous``.
     """
@@ -150,15 +164,11 @@ def segment_features(
     med_along = _group_median(along, g, start, n)
     med_across = _group_median(across, g, start, n)
     out[:, 2] = _group_sum(np.hypot(along - med_along[g], across - med_across[g]), start, n) / nf
-    # C.4/C.5: jumps to the neighbouring segments
+    # C.4/C.5: jumps to the neighbouring beams
     first = P[start]
     last = P[stop - 1]
-    out[:, 3] = range_max
-    out[:, 4] = range_max
-    if S > 1:
-        gap = np.hypot(*(first[1:] - last[:-1]).T)
-        out[1:, 3] = gap
-        out[:-1, 4] = gap
+    out[:, 3] = _border_jump(seg, first, start, -1, range_max)
+    out[:, 4] = _border_jump(seg, last, stop - 1, +1, range_max)
     # C.6
     out[:, 5] = np.hypot(*(last - first).T)
     # C.7: smaller eigenvalue of the scatter matrix = perpendicular residual sum of squares
@@ -219,11 +229,30 @@ def segment_features(
         out[:, 12] = np.bincount(gt, weights=beta, minlength=S) / m3
     # C.14
     if previous is not None:
-        out[:, MOTION_COLUMN] = _mean_speed(seg, previous, dt, range_max)
+        out[:, MOTION_COLUMN] = _mean_speed(seg, previous, dt, range_max, range_min)
     return out
 
 
-def _mean_speed(seg: Segmentation, previous: npt.ArrayLike, dt: float | None, range_max: float) -> FloatArray:
+def _border_jump(
+    seg: Segmentation, ends: FloatArray, packed: npt.NDArray[np.intp], side: int, range_max: float
+) -> FloatArray:
+    """C.4 (``side = −1``) or C.5 (``+1``): distance from each segment's end point ``ends``
+    ``(S, 2)`` (packed point ``packed``) to the end point of the beam beside it (see the module doc)."""
+    beam = seg.index[packed] + side
+    nb = packed + side
+    inside = (beam >= 0) & (beam < seg.n_beams)
+    # the neighbouring beam has a return iff it is the neighbouring packed point's beam
+    ok = (nb >= 0) & (nb < seg.n_points)
+    has = np.zeros(beam.shape, dtype=bool)
+    has[ok] = seg.index[nb[ok]] == beam[ok]
+    other = range_max * seg.beam_directions(beam)
+    other[has] = seg.points[nb[has]]
+    return np.asarray(np.where(inside, np.hypot(*(ends - other).T), range_max))
+
+
+def _mean_speed(
+    seg: Segmentation, previous: npt.ArrayLike, dt: float | None, range_max: float, range_min: float
+) -> FloatArray:
     prev = np.asarray(previous, dtype=np.float64)
     if prev.shape != (seg.n_beams,):
         raise ValueError(
@@ -232,7 +261,7 @@ def _mean_speed(seg: Segmentation, previous: npt.ArrayLike, dt: float | None, ra
         )
     if dt is None or not (math.isfinite(dt) and dt > 0):
         raise ValueError(f"dt must be the positive number of seconds between the two scans, got {dt!r}")
-    ok = has_return(prev, range_max)[seg.index]
+    ok = has_return(prev, range_max, range_min)[seg.index]
     v = np.where(ok, (seg.ranges - np.where(ok, prev[seg.index], 0.0)) / dt, 0.0)
     S = seg.n_segments
     g = seg.point_segment

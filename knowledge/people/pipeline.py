@@ -110,9 +110,13 @@ class PeoplePipeline:
         angle_min: float,
         angle_increment: float,
         range_max: float,
+        range_min: float = 0.0,
         sensor_pose: tuple[float, float, float] | None = None,
     ) -> PeopleFrame:
         """Detect and track people in one scan ``(B,)`` (metres) taken at ``stamp`` seconds.
+
+        ``range_min``/``range_max``: the sensor's limits in metres; readings outside them are
+        no returns (e.g. a Hokuyo's error codes of a few millimetres, below its ``range_min``).
 
         ``sensor_pose`` ``(x, y, θ)`` is the sensor's pose in the fixed tracking frame at
         ``stamp`` (None: track in the sensor frame, for a sensor that does not move).
@@ -123,7 +127,9 @@ class PeoplePipeline:
             t0, r0 = self._previous
             if r0.shape == r.shape and 0 < stamp - t0 <= MAX_MOTION_GAP:
                 prev, dt = r0, stamp - t0
-        det = self.detector.detect(r, angle_min, angle_increment, range_max=range_max, previous=prev, dt=dt)
+        det = self.detector.detect(
+            r, angle_min, angle_increment, range_max=range_max, range_min=range_min, previous=prev, dt=dt
+        )
         self._previous = (float(stamp), r)
         legs = to_frame(det.legs, sensor_pose)
         people = pair_legs(legs, max_distance=self.pair_distance, lone_legs=self.lone_legs)
@@ -132,12 +138,13 @@ class PeoplePipeline:
 
     def process_scan(self, scan: Any, sensor_pose: tuple[float, float, float] | None = None) -> PeopleFrame:
         """:meth:`process` for a :class:`drivers.messages.LaserScan` (duck-typed: ``ranges``,
-        ``stamp``, ``angle_min``, ``angle_increment``, ``range_max``)."""
+        ``stamp``, ``angle_min``, ``angle_increment``, ``range_max``; ``range_min`` if it has one)."""
         return self.process(
             scan.ranges,
             float(scan.stamp),
             angle_min=float(scan.angle_min),
             angle_increment=float(scan.angle_increment),
             range_max=float(scan.range_max),
+            range_min=float(getattr(scan, "range_min", 0.0)),
             sensor_pose=sensor_pose,
         )

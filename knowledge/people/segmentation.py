@@ -5,8 +5,10 @@ A scan is ``B`` beams ``(ρ_m, d_m)``: beam ``m`` at angle ``angle_min + m·angl
 is ``p_m = (d_m cos ρ_m, d_m sin ρ_m)`` in the sensor frame.
 
 A beam has *no return* when its range is not finite, ``≤ 0`` (both used by drivers for "no
-echo"), or ``≥ range_max`` (the house convention: a beam that hit nothing carries the sensor's
-maximum range). Such beams have no end point and belong to no segment.
+echo"), below ``range_min`` (the sensor's error codes: a Hokuyo reports its errors as ranges of
+1–19 mm, and a ROS ``LaserScan`` marks everything below ``range_min`` invalid), or
+``≥ range_max`` (the house convention: a beam that hit nothing carries the sensor's maximum
+range). Such beams have no end point and belong to no segment.
 
 Segmentation walks the beams that have a return, in beam order, and starts a new segment
 whenever the Euclidean distance between two consecutive end points exceeds ``jump`` (15 cm
@@ -43,11 +45,11 @@ def beam_angles(n_beams: int, angle_min: float, angle_increment: float) -> Float
     return angle_min + np.arange(n_beams, dtype=np.float64) * angle_increment
 
 
-def has_return(ranges: npt.ArrayLike, range_max: float) -> BoolArray:
-    """``(B,)`` bool: the beam hit something (finite, > 0 and < ``range_max`` metres)."""
+def has_return(ranges: npt.ArrayLike, range_max: float, range_min: float = 0.0) -> BoolArray:
+    """``(B,)`` bool: the beam hit something (finite, > 0, ≥ ``range_min`` and < ``range_max`` metres)."""
     r = np.asarray(ranges, dtype=np.float64)
     with np.errstate(invalid="ignore"):
-        return np.asarray(np.isfinite(r) & (r > 0.0) & (r < range_max))
+        return np.asarray(np.isfinite(r) & (r > 0.0) & (r >= range_min) & (r < range_max))
 
 
 @dataclass(frozen=True, eq=False)
@@ -62,6 +64,7 @@ class Segmentation:
         start: ``(S,)`` first packed point of each segment (``start[0] = 0``).
         stop: ``(S,)`` one past the last packed point of each segment (``stop[-1] = M``).
         jump: the jump distance used, metres.
+        angle_min: angle of beam 0, radians; angle_increment: radians between beams.
     """
 
     n_beams: int
@@ -71,6 +74,13 @@ class Segmentation:
     start: IntArray
     stop: IntArray
     jump: float
+    angle_min: float
+    angle_increment: float
+
+    def beam_directions(self, beams: IntArray) -> FloatArray:
+        """``(K, 2)`` unit vectors of beams ``beams`` (any indices, also outside ``[0, B)``)."""
+        theta = self.angle_min + np.asarray(beams, dtype=np.float64) * self.angle_increment
+        return np.column_stack([np.cos(theta), np.sin(theta)])
 
     @property
     def n_segments(self) -> int:
@@ -130,15 +140,18 @@ def segment_scan(
     angle_increment: float,
     *,
     range_max: float,
+    range_min: float = 0.0,
     jump: float = DEFAULT_JUMP,
     max_gap: int | None = None,
 ) -> Segmentation:
     """Split one scan ``(B,)`` (metres) into segments by the jump distance (see the module doc).
 
     Args:
-        ranges: ``(B,)`` ranges in metres; inf, NaN, ``≤ 0`` or ``≥ range_max`` mean no return.
+        ranges: ``(B,)`` ranges in metres; inf, NaN, ``≤ 0``, ``< range_min`` or ``≥ range_max``
+            mean no return.
         angle_min: angle of beam 0 in radians; angle_increment: radians between beams (> 0).
         range_max: the sensor's maximum range in metres.
+        range_min: the sensor's minimum range in metres (shorter readings are error codes).
         jump: the jump distance in metres (> 0).
         max_gap: most no-return beams in a row a segment may span (None: no limit).
     """
@@ -151,11 +164,13 @@ def segment_scan(
         raise ValueError(f"angle_min must be a finite angle in radians, got {angle_min}")
     if not (math.isfinite(range_max) and range_max > 0):
         raise ValueError(f"range_max must be a positive number of metres, got {range_max}")
+    if not (math.isfinite(range_min) and 0 <= range_min < range_max):
+        raise ValueError(f"range_min must be a number of metres in [0, range_max), got {range_min}")
     if not (math.isfinite(jump) and jump > 0):
         raise ValueError(f"jump must be a positive distance in metres (the book uses 0.15), got {jump}")
     if max_gap is not None and (int(max_gap) != max_gap or max_gap < 0):
         raise ValueError(f"max_gap must be None or a number of beams >= 0, got {max_gap!r}")
-    index = np.flatnonzero(has_return(r, range_max)).astype(np.intp)
+    index = np.flatnonzero(has_return(r, range_max, range_min)).astype(np.intp)
     rr = r[index]
     theta = angle_min + index * angle_increment
     points = np.empty((index.size, 2))
@@ -163,7 +178,17 @@ def segment_scan(
     points[:, 1] = rr * np.sin(theta)
     if index.size == 0:
         empty = np.zeros(0, dtype=np.intp)
-        return Segmentation(r.size, index, rr, points, empty, empty.copy(), float(jump))
+        return Segmentation(
+            r.size,
+            index,
+            rr,
+            points,
+            empty,
+            empty.copy(),
+            float(jump),
+            float(angle_min),
+            float(angle_increment),
+        )
     d = points[1:] - points[:-1]
     cut = (d[:, 0] ** 2 + d[:, 1] ** 2) > jump * jump
     if max_gap is not None:
@@ -171,4 +196,6 @@ def segment_scan(
     brk = np.flatnonzero(cut) + 1
     start = np.concatenate(([0], brk)).astype(np.intp)
     stop = np.concatenate((brk, [index.size])).astype(np.intp)
-    return Segmentation(r.size, index, rr, points, start, stop, float(jump))
+    return Segmentation(
+        r.size, index, rr, points, start, stop, float(jump), float(angle_min), float(angle_increment)
+    )

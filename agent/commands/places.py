@@ -176,6 +176,11 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="decision-list order: best (try all), heuristic (by training error) or A,B,C (default best)",
     )
     t.add_argument("--booster", choices=("generalized", "discrete"), default="generalized")
+    t.add_argument(
+        "--uniform-weights",
+        action="store_true",
+        help="start boosting from uniform example weights instead of the book's class-balanced ones",
+    )
     t.add_argument("--beams", type=int, default=360, help="beams of the simulated 360° scans (360)")
     t.add_argument("--max-range", type=float, default=30.0, metavar="M", help="sensor maximum range (30 m)")
     t.add_argument("--json", action="store_true", help="print one JSON object instead of text")
@@ -249,6 +254,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         rounds=args.rounds,
         booster=args.booster,
         order=order,
+        balanced=not args.uniform_weights,
     )
     with Progress(enabled=not args.quiet) as progress:
         maps = _load_maps(args, progress)

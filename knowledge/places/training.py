@@ -48,6 +48,8 @@ class TrainingConfig:
         weak: weak learner kind ("threshold", "interval" or "both").
         order: "best" (every order tried), "heuristic" (training error) or explicit names.
         features: feature names to offer the boosters; None = the whole family.
+        balanced: start boosting from class-balanced weights 1/(2l), 1/(2m) as the book's
+            Fig. 3.3/4.2 do (True), or from uniform weights 1/N (False).
     """
 
     classes: tuple[str, ...] | None = None
@@ -60,6 +62,7 @@ class TrainingConfig:
     weak: str = "threshold"
     order: str | tuple[str, ...] = "best"
     features: tuple[str, ...] | None = None
+    balanced: bool = True
 
     def __post_init__(self) -> None:
         if self.booster not in ("generalized", "discrete"):
@@ -83,6 +86,7 @@ class TrainingConfig:
             "weak": self.weak,
             "order": self.order if isinstance(self.order, str) else list(self.order),
             "features": "all" if self.features is None else len(self.features),
+            "balanced": self.balanced,
         }
 
 
@@ -178,7 +182,9 @@ def train_place_model(
     X = features_of(scans, names, config.max_range, progress)
     t2 = time.perf_counter()
     booster_cls = GeneralizedAdaBoost if config.booster == "generalized" else DiscreteAdaBoost
-    factory = functools.partial(booster_cls, n_rounds=config.rounds, weak=config.weak)
+    factory = functools.partial(
+        booster_cls, n_rounds=config.rounds, weak=config.weak, balanced=config.balanced
+    )
     order: str | tuple[str, ...] = config.order
     dl = DecisionList(factory, order=order)
     dl.fit(X, scans.y, classes=classes, progress=progress)

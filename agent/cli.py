@@ -10,6 +10,7 @@ import argparse
 import importlib
 import logging
 import sys
+import traceback
 from collections.abc import Sequence
 
 from knowledge.errors import LociError
@@ -22,6 +23,8 @@ COMMAND_MODULES: list[str] = [
     "agent.commands.sick",
     "agent.commands.sim",
     "agent.commands.record",
+    "agent.commands.run",
+    "agent.commands.replay",
 ]
 
 
@@ -35,7 +38,7 @@ def build_parser() -> argparse.ArgumentParser:
         ),
         epilog="Run 'loci COMMAND --help' for the options of a command.",
     )
-    parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
+    parser.add_argument("-v", "--verbose", action="count", default=0, help="debug log output")
     parser.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMAND_MODULES:
@@ -52,7 +55,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     try:
         result = args.handler(args)
-    except LociError as exc:
+    except (LociError, ValueError) as exc:
+        # LociErrors and bad values say what is wrong and what to do: no traceback (but -v shows it)
+        if args.verbose:
+            traceback.print_exc()
         print(f"loci: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

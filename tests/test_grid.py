@@ -101,3 +101,21 @@ def test_atomic_write_keeps_usual_permissions(tmp_path: Path) -> None:
     p.chmod(0o600)
     atomic_write_text(p, "y")
     assert p.stat().st_mode & 0o777 == 0o600 and p.read_text() == "y"
+
+
+@given(
+    x=st.floats(-1.0, 3.0),
+    y=st.floats(-1.0, 6.0),
+    yaw=st.sampled_from([0.0, 0.3, -2.0]),
+)
+def test_integer_and_continuous_cells_agree(x: float, y: float, yaw: float) -> None:
+    grid = OccupancyGrid(np.zeros((10, 20), np.int8), 0.5, origin=(0.0, 0.0, yaw))
+    p = np.array([x, y])
+    assert grid.world_to_cell(p).tolist() == np.floor(grid.world_to_cell_float(p)).astype(int).tolist()
+
+
+def test_a_point_on_the_bottom_border_lies_below_the_map() -> None:
+    grid = OccupancyGrid(np.zeros((10, 20), np.int8), 0.5)
+    # y = 0 is the lower edge of the lowest row: the half-open cells put it just outside
+    assert grid.world_to_cell(np.array([0.05, 0.0])).tolist() == [10, 0]
+    assert grid.world_to_cell(np.array([0.05, 1e-9])).tolist() == [9, 0]

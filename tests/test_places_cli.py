@@ -99,3 +99,50 @@ def test_errors_are_clear(tmp_path: Path) -> None:
     assert proc.returncode == 2 and "no such model file" in proc.stderr
     proc = loci("places", "train", "--out", str(tmp_path / "x.npz"), check=False)
     assert proc.returncode != 0 and "no maps given" in proc.stderr
+
+
+def test_evaluate_ignores_classes_the_model_lacks_consistently(
+    model_file: tuple[Path, dict[str, object]],
+) -> None:
+    path, _ = model_file  # a 3-class model (halls merged into corridors at training)
+    result = json.loads(
+        loci(
+            "places",
+            "evaluate",
+            "--model",
+            str(path),
+            "--generated",
+            "1",
+            "--seed",
+            "1",
+            "--stride",
+            "8",
+            "--json",
+        ).stdout  # fmt: skip
+    )
+    if "hallway" not in result["ignored"]:
+        pytest.skip("this generated building has no hall")
+    assert np.array(result["confusion"]).sum() == result["examples"]
+    model_row = next(r for r in result["orders"] if r["order"] == result["order"])
+    assert model_row["accuracy"] == pytest.approx(result["accuracy"], abs=1e-6)
+
+
+def test_bad_option_values_are_errors_not_tracebacks(tmp_path: Path) -> None:
+    for args in (
+        ("places", "train", "--generated", "1", "--stride", "0", "--out", str(tmp_path / "a.npz")),
+        ("places", "train", "--generated", "1", "--rounds", "0", "--out", str(tmp_path / "a.npz")),
+        (
+            "places",
+            "train",
+            "--generated",
+            "1",
+            "--classes",
+            "room,kitchen",
+            "--out",
+            str(tmp_path / "a.npz"),
+        ),
+        ("places", "train", "--generated", "1", "--order", "room,corridor", "--out", str(tmp_path / "a.npz")),
+    ):
+        proc = loci(*args, check=False)
+        assert proc.returncode == 2, (args, proc.stderr)
+        assert "Traceback" not in proc.stderr and "loci: error:" in proc.stderr, proc.stderr

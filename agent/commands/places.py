@@ -151,7 +151,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "features, one generalized-AdaBoost booster per class, the decision-list order, and the\n"
         "label statistics for relaxation. Writes one .npz model file.",
         epilog="Example: loci places train --ipa Fr52 --ipa lab_ipa --stride 4 --out fr52_ipa.npz\n"
-        "The bundled default model: loci places train --generated 40 --seed 1000 --merge hallway=corridor "
+        "The bundled default model: loci places train --generated 40 --seed 1000 --stride 8 "
         "--out knowledge/places/models/default.npz",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -258,6 +258,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     )
     with Progress(enabled=not args.quiet) as progress:
         maps = _load_maps(args, progress)
+        _check_classes(maps, config)
         log.info("training on %d maps: %s", len(maps), ", ".join(m.name for m in maps))
         model, timings = train_place_model(maps, config, progress=progress)
     model.save(args.out)
@@ -293,6 +294,21 @@ def cmd_train(args: argparse.Namespace) -> int:
     )
     print(f"wrote {args.out}")
     return 0
+
+
+def _check_classes(maps: list[Any], config: Any) -> None:
+    """Refuse --classes/--order that do not fit the maps before any scan is cast."""
+    from knowledge.places.training import merge_classes
+
+    present: set[str] = set()
+    for m in maps:
+        present |= set(merge_classes(m, config.merge).class_counts())
+    classes = set(config.classes) if config.classes else present
+    missing = sorted(classes - present)
+    if missing:
+        raise ValueError(f"--classes names {missing}, which no map labels; the maps have {sorted(present)}")
+    if not isinstance(config.order, str) and set(config.order) != classes:
+        raise ValueError(f"--order must list every class once: {sorted(classes)} (got {list(config.order)})")
 
 
 def _importance_table(model: Any, top: int = 7) -> dict[str, list[str]]:
@@ -333,11 +349,13 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             X[start:stop] = model.features(scans.ranges[start:stop], all_features=True)
             progress("features", stop, len(scans))
     t2 = time.perf_counter()
+    classes = [c for c in model.classes if c not in merge]
+    known = np.isin(scans.y, classes)
+    ignored = {str(c): int(n) for c, n in zip(*np.unique(scans.y[~known], return_counts=True), strict=True)}
+    X, truth = X[known], scans.y[known]
     pred = model.decision_list.predict(X)
     pred = np.array([merge.get(c, c) for c in pred]) if merge else pred
     t3 = time.perf_counter()
-    truth = scans.y
-    classes = [c for c in model.classes if c not in merge]
     s_all = score(truth, pred, classes)
     two = [c for c in ("room", "corridor") if c in classes]
     s_two = score(truth, pred, two) if len(two) == 2 else None
@@ -347,7 +365,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     result: dict[str, Any] = {
         "model": str(args.model or "bundled default"),
         "maps": list(scans.maps),
-        "examples": len(scans),
+        "examples": int(known.sum()),
+        "ignored": ignored,
         "classes": classes,
         "order": list(model.decision_list.order_),
         **{k: v for k, v in s_all.as_dict().items() if k != "n"},
@@ -365,8 +384,16 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         _emit_json(result)
         return 0
     print(
-        f"{len(scans)} scans in {', '.join(scans.maps)}; model order {' -> '.join(model.decision_list.order_)}"
+        f"{int(known.sum())} scans in {', '.join(scans.maps)}; "
+        f"model order {' -> '.join(model.decision_list.order_)}"
     )
+    if ignored:
+        hint = "; count halls as corridors with --merge hallway=corridor" if "hallway" in ignored else ""
+        print(
+            "not scored (classes the model does not have): "
+            + ", ".join(f"{c} {n}" for c, n in ignored.items())
+            + (hint or "; rename them with --merge CLASS=CLASS")
+        )
     print(f"accuracy            {_pct(s_all.accuracy)}   ({len(classes)} classes)")
     print(f"balanced accuracy   {_pct(s_all.balanced_accuracy)}")
     if s_two is not None:

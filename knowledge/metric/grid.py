@@ -12,9 +12,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import cv2
 import numpy as np
@@ -48,7 +47,6 @@ class OccupancyGrid:
     resolution: float
     origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
     name: str = "map"
-    _cache: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         st = np.asarray(self.state)
@@ -158,7 +156,13 @@ class OccupancyGrid:
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> OccupancyGrid:
-        """Load a ROS map_server map: the YAML file and the image it names (relative to it)."""
+        """Load a ROS map_server map: the YAML file and the image it names (relative to it).
+
+        Modes: ``trinary`` (the default) and ``scale`` are thresholded alike — a grid here has
+        three states, so ``scale``'s in-between probabilities become unknown; ``raw`` reads
+        pixel values as occupancy 0–100 (≥ 50 occupied, < 50 free, > 100 unknown), without
+        ``negate``, as map_server does.
+        """
         p = Path(path)
         try:
             meta = yaml.safe_load(p.read_text())
@@ -285,13 +289,11 @@ class OccupancyGrid:
         return self._map_to_world(mx, my)
 
     def world_to_cell(self, xy: np.ndarray) -> np.ndarray:
-        """``(row, col)`` int64 of the cells containing world points ``(..., 2)`` (may be out of bounds)."""
-        p = np.asarray(xy, dtype=np.float64)
-        mx, my = self._world_to_map(p[..., 0], p[..., 1])
-        rows, _ = self.shape
-        col = np.floor(mx / self.resolution)
-        row = rows - 1 - np.floor(my / self.resolution)
-        return np.stack([row, col], axis=-1).astype(np.int64)
+        """``(row, col)`` int64 of the cells containing world points ``(..., 2)`` (may be out of bounds).
+
+        The floor of :meth:`world_to_cell_float`, so both agree on points on cell borders.
+        """
+        return np.floor(self.world_to_cell_float(xy)).astype(np.int64)
 
     def world_to_cell_float(self, xy: np.ndarray) -> np.ndarray:
         """Continuous ``(row, col)`` of world points: cell ``(r, c)`` spans ``[r, r+1) × [c, c+1)``."""

@@ -24,6 +24,8 @@ ProgressFn = Callable[[str, int, int], None]
 
 #: Scans classified per batch: bounds the memory of the feature matrix.
 DEFAULT_CHUNK = 32_768
+#: Cells cast per block (≈ 377 MB of float32 ranges at 360 beams).
+DEFAULT_BLOCK = 1 << 18
 
 
 def class_codes(classes: tuple[str, ...]) -> dict[str, int]:
@@ -64,12 +66,6 @@ class MapLabels:
         """``(N,)`` class names of the classified cells."""
         return np.asarray(self.classes)[np.argmax(self.proba, axis=1)]
 
-    def proba_image(self) -> np.ndarray:
-        """``(rows, cols, K)`` float32 histograms, zeros on non-free cells."""
-        out = np.zeros((*self.labels.shape, len(self.classes)), dtype=np.float32)
-        out[self.cells[:, 0], self.cells[:, 1]] = self.proba
-        return out
-
 
 def label_map(
     grid: OccupancyGrid,
@@ -77,30 +73,37 @@ def label_map(
     *,
     cells: np.ndarray | None = None,
     chunk: int = DEFAULT_CHUNK,
+    block: int = DEFAULT_BLOCK,
     progress: ProgressFn | None = None,
 ) -> MapLabels:
-    """Classify every free cell of ``grid`` (or the given ``(N, 2)`` cells) with ``model``."""
-    if chunk < 1:
-        raise ValueError(f"chunk must be >= 1 scan, got {chunk}")
+    """Classify every free cell of ``grid`` (or the given ``(N, 2)`` cells) with ``model``.
+
+    Cells are cast in blocks of ``block`` (each cast also pays a whole-grid set-up, so
+    blocks are large) into one reused buffer, and classified ``chunk`` scans at a time:
+    peak memory is about ``block × n_beams × 4`` bytes, not that of every scan of the map.
+    """
+    if chunk < 1 or block < 1:
+        raise ValueError(f"chunk and block must be >= 1 scan, got {chunk} and {block}")
     t0 = time.perf_counter()
     todo = grid.free_cells() if cells is None else np.asarray(cells, dtype=np.int64)
     scan = model.scan
-
-    def cast_progress(done: int, total: int) -> None:
-        if progress is not None:
-            progress("cast", done, total)
-
-    ranges = cast_cells(grid, todo, n_beams=scan.n_beams, max_range=scan.max_range, progress=cast_progress)
-    t1 = time.perf_counter()
     n = len(todo)
     proba = np.empty((n, len(model.classes)), dtype=np.float32)
-    for start in range(0, n, chunk):
-        stop = min(n, start + chunk)
-        proba[start:stop] = model.predict_proba_scans(ranges[start:stop])
-        if progress is not None:
-            progress("classify", stop, n)
-    del ranges
-    t2 = time.perf_counter()
+    buffer = np.empty((min(block, max(n, 1)), scan.n_beams), dtype=np.float32)
+    t_cast = 0.0
+    for b0 in range(0, n, block):
+        b1 = min(n, b0 + block)
+        out = buffer[: b1 - b0]
+        tc = time.perf_counter()
+        cast_cells(grid, todo[b0:b1], n_beams=scan.n_beams, max_range=scan.max_range, out=out)
+        t_cast += time.perf_counter() - tc
+        for start in range(b0, b1, chunk):
+            stop = min(b1, start + chunk)
+            proba[start:stop] = model.predict_proba_scans(out[start - b0 : stop - b0])
+            if progress is not None:
+                progress("label", stop, n)
+    del buffer
+    total = time.perf_counter() - t0
     codes = class_codes(model.classes)
     code_of = np.array([codes[c] for c in model.classes], dtype=np.uint8)
     labels = np.zeros(grid.shape, dtype=np.uint8)
@@ -112,5 +115,5 @@ def label_map(
         proba=proba,
         classes=model.classes,
         codes=codes,
-        timings={"cast": t1 - t0, "classify": t2 - t1, "total": time.perf_counter() - t0},
+        timings={"cast": t_cast, "classify": total - t_cast, "total": time.perf_counter() - t0},
     )

@@ -359,7 +359,10 @@ def _from_header(p: Path, header: Mapping[str, Any], arrays: Mapping[str, npt.ND
     names = header["feature_names"]
     if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
         raise ModelError(f"{p}: feature_names must be a non-empty list of names")
-    data = DataSummary.from_json(dict(header.get("data") or {}))
+    try:
+        data = DataSummary.from_json(dict(header.get("data") or {}))
+    except (TypeError, ValueError) as exc:
+        raise ModelError(f"{p}: the training-data summary in the header is damaged ({exc}): retrain") from exc
     from knowledge.places.features import validate_feature_names
 
     try:

@@ -162,11 +162,6 @@ class CompatibilityStats:
         return len(self.classes) + 1
 
     @property
-    def wall_index(self) -> int:
-        """Column of the wall label in histograms (the last one)."""
-        return len(self.classes)
-
-    @property
     def per_direction(self) -> bool:
         """True when there is one compatibility matrix per neighbour direction."""
         return int(self.counts.shape[0]) == 8
@@ -549,14 +544,3 @@ def argmax_labels(
             raise ValueError(f"free_mask {free.shape} must match the histograms' grid {out.shape}")
         out[~free] = 0
     return out
-
-
-def relaxation_summary(stats: CompatibilityStats) -> dict[str, object]:
-    """A JSON-friendly view of the statistics: label names, priors and the ``r`` matrices."""
-    return {
-        "labels": list(stats.label_names),
-        "per_direction": stats.per_direction,
-        "smoothing": stats.smoothing,
-        "prior": np.round(stats.prior, 6).tolist(),
-        "r": np.round(stats.r.astype(np.float64), 6).tolist(),
-    }

@@ -22,11 +22,7 @@ with ``allow_pickle=False``; every problem on loading is a :class:`ModelError`.
 
 from __future__ import annotations
 
-import io
-import json
 import math
-import zipfile
-import zlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -38,7 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from knowledge.errors import ModelError, NotFittedError
-from knowledge.fileio import atomic_write_bytes
+from knowledge.npzfile import read_npz, write_npz
 from knowledge.people.features import (
     DEFAULT_COLUMNS,
     FEATURE_CODES,
@@ -52,7 +48,6 @@ from knowledge.places.boosting import STATE_ARRAYS, GeneralizedAdaBoost, booster
 
 FORMAT = "loci.people-model/2"
 FORMAT_FAMILY = "loci.people-model/"
-HEADER_KEY = "header_json"
 BOOSTER_PREFIX = "booster."
 #: The detector shipped with genius-loci (see docs/people.md for the command that made it).
 DEFAULT_MODEL = Path(__file__).resolve().parent / "models" / "legs_default.npz"
@@ -317,19 +312,8 @@ class LegDetector:
 
     def save(self, path: str | Path) -> Path:
         """Write the detector to ``path`` (a ``.npz``) atomically; returns the path."""
-        header = self.header()
-        try:
-            text = json.dumps(header, allow_nan=False, sort_keys=True)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(
-                f"the model header is not plain JSON (check the training summary): {exc}"
-            ) from exc
         _, arrays = self.booster_.get_state()
-        out: dict[str, npt.NDArray[Any]] = {HEADER_KEY: np.frombuffer(text.encode("utf-8"), dtype=np.uint8)}
-        out.update({BOOSTER_PREFIX + k: np.asarray(v) for k, v in arrays.items()})
-        buf = io.BytesIO()
-        np.savez_compressed(buf, **out)  # type: ignore[arg-type]
-        return atomic_write_bytes(path, buf.getvalue())
+        return write_npz(path, self.header(), {BOOSTER_PREFIX + k: v for k, v in arrays.items()})
 
     @classmethod
     def load(cls, path: str | Path | None = None) -> LegDetector:
@@ -338,43 +322,10 @@ class LegDetector:
         if not p.is_file():
             hint = "reinstall genius-loci" if path is None else "check the path or run 'loci people train'"
             raise ModelError(f"{p}: no such people model file; {hint}")
-        header, arrays = _read_npz(p)
+        header, arrays = read_npz(
+            p, what=f"genius-loci people model ({FORMAT} .npz)", retrain="retrain it with 'loci people train'"
+        )
         return _from_header(p, header, arrays)
-
-
-def _read_npz(p: Path) -> tuple[dict[str, Any], dict[str, npt.NDArray[Any]]]:
-    not_model = f"{p}: not a genius-loci people model ({FORMAT} .npz)"
-    try:
-        loaded = np.load(p, allow_pickle=False)
-    except ValueError as exc:
-        raise ModelError(f"{not_model}: unreadable as .npz ({exc})") from exc
-    except (OSError, EOFError, zipfile.BadZipFile) as exc:
-        raise ModelError(f"{not_model}: {exc}; the file may be truncated: copy or train it again") from exc
-    if not isinstance(loaded, np.lib.npyio.NpzFile):
-        raise ModelError(f"{not_model}: it holds a single array, not a model archive")
-    arrays: dict[str, npt.NDArray[Any]] = {}
-    with loaded as npz:
-        if HEADER_KEY not in npz.files:
-            raise ModelError(f"{not_model}: it has no {HEADER_KEY!r} entry")
-        for key in npz.files:
-            try:
-                arrays[key] = npz[key]
-            except ValueError as exc:
-                raise ModelError(
-                    f"{p}: entry {key!r} is a pickled object array, which models never contain; do not use the file"
-                ) from exc
-            except (OSError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
-                raise ModelError(f"{p}: entry {key!r} is damaged ({exc}); train or copy it again") from exc
-    raw = arrays.pop(HEADER_KEY)
-    try:
-        if raw.dtype != np.uint8 or raw.ndim != 1:
-            raise ValueError(f"{HEADER_KEY} must be a 1-D uint8 array")
-        header = json.loads(raw.tobytes().decode("utf-8"))
-        if not isinstance(header, dict):
-            raise ValueError("the header is not a JSON object")
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise ModelError(f"{not_model}: its header is not valid JSON ({exc})") from exc
-    return header, arrays
 
 
 def _from_header(p: Path, header: Mapping[str, Any], arrays: Mapping[str, npt.NDArray[Any]]) -> LegDetector:

@@ -22,11 +22,7 @@ and what to do.
 
 from __future__ import annotations
 
-import io
-import json
 import math
-import zipfile
-import zlib
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, fields
 from datetime import UTC, datetime
@@ -38,14 +34,14 @@ import numpy as np
 import numpy.typing as npt
 
 from knowledge.errors import ModelError
-from knowledge.fileio import atomic_write_bytes
+from knowledge.npzfile import read_npz, write_npz
 from knowledge.places.boosting import STATE_ARRAYS
 from knowledge.places.decision_list import DecisionList
 from knowledge.places.weak import FloatArray
 
 FORMAT = "loci.place-model/1"
 FORMAT_FAMILY = "loci.place-model/"
-HEADER_KEY = "header_json"
+RETRAIN = "retrain it with 'loci places train'"
 DL_PREFIX = "dl."
 EXTRA_PREFIX = "extra."
 
@@ -268,28 +264,10 @@ class PlaceModel:
 
     def save(self, path: str | Path) -> Path:
         """Write the model to ``path`` (a ``.npz``) atomically; returns the path."""
-        header = self.header()
-        try:
-            text = json.dumps(header, allow_nan=False, sort_keys=True)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(
-                f"the model header is not plain JSON (check training, data notes, extras_meta): {exc}"
-            ) from exc
         _, dl_arrays = self.decision_list.get_state()
-        arrays: dict[str, npt.NDArray[Any]] = {
-            HEADER_KEY: np.frombuffer(text.encode("utf-8"), dtype=np.uint8)
-        }
-        arrays.update({DL_PREFIX + k: np.asarray(v) for k, v in dl_arrays.items()})
-        for name, arr in self.extras.items():
-            a = np.asarray(arr)
-            if a.dtype.hasobject:
-                raise ValueError(
-                    f"extras[{name!r}] is an object array; models hold numeric/string arrays only"
-                )
-            arrays[EXTRA_PREFIX + name] = a
-        buf = io.BytesIO()
-        np.savez_compressed(buf, **arrays)  # type: ignore[arg-type]
-        return atomic_write_bytes(path, buf.getvalue())
+        arrays: dict[str, npt.ArrayLike] = {DL_PREFIX + k: v for k, v in dl_arrays.items()}
+        arrays.update({EXTRA_PREFIX + name: arr for name, arr in self.extras.items()})
+        return write_npz(path, self.header(), arrays)
 
     @classmethod
     def load(cls, path: str | Path) -> PlaceModel:
@@ -297,49 +275,8 @@ class PlaceModel:
         p = Path(path)
         if not p.is_file():
             raise ModelError(f"{p}: no such model file; check the path or train a model first")
-        header, arrays = _read_npz(p)
+        header, arrays = read_npz(p, what=f"genius-loci place model ({FORMAT} .npz)", retrain=RETRAIN)
         return _from_header(p, header, arrays)
-
-
-def _read_npz(p: Path) -> tuple[dict[str, Any], dict[str, npt.NDArray[Any]]]:
-    """The header and the arrays of a model file, or ModelError."""
-    not_model = f"{p}: not a genius-loci place model ({FORMAT} .npz)"
-    try:
-        loaded = np.load(p, allow_pickle=False)
-    except ValueError as exc:  # not .npy/.npz: numpy would have to unpickle it
-        raise ModelError(
-            f"{not_model}: unreadable as .npz ({exc}); was it written by PlaceModel.save?"
-        ) from exc
-    except (OSError, EOFError, zipfile.BadZipFile) as exc:
-        raise ModelError(f"{not_model}: {exc}; the file may be truncated: copy or save it again") from exc
-    if not isinstance(loaded, np.lib.npyio.NpzFile):
-        raise ModelError(f"{not_model}: it holds a single array, not a model archive")
-    arrays: dict[str, npt.NDArray[Any]] = {}
-    with loaded as npz:
-        if HEADER_KEY not in npz.files:
-            raise ModelError(f"{not_model}: it has no {HEADER_KEY!r} entry")
-        for key in npz.files:
-            try:
-                arrays[key] = npz[key]
-            except ValueError as exc:
-                raise ModelError(
-                    f"{p}: entry {key!r} is a pickled object array, which models never contain; "
-                    "the file was not written by genius-loci (or was tampered with): do not use it"
-                ) from exc
-            except (OSError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
-                raise ModelError(
-                    f"{p}: entry {key!r} is damaged ({exc}); the file may be truncated: save it again"
-                ) from exc
-    raw = arrays.pop(HEADER_KEY)
-    try:
-        if raw.dtype != np.uint8 or raw.ndim != 1:
-            raise ValueError(f"{HEADER_KEY} must be a 1-D uint8 array")
-        header = json.loads(raw.tobytes().decode("utf-8"))
-        if not isinstance(header, dict):
-            raise ValueError("the header is not a JSON object")
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise ModelError(f"{not_model}: its header is not valid JSON ({exc})") from exc
-    return header, arrays
 
 
 def _from_header(p: Path, header: Mapping[str, Any], arrays: Mapping[str, npt.NDArray[Any]]) -> PlaceModel:

@@ -1,0 +1,317 @@
+"""``loci replay``: run the agent's pipeline offline on a recording.
+
+The recorded ``loci/<robot>/scan`` and ``loci/<robot>/odom`` messages go through the same
+:class:`~agent.odom_sync.OdomSync` and :class:`~agent.pipeline.Pipeline` as in ``loci run``,
+in file order, with the recorded arrival times (MCAP log times) standing in for the clock,
+as fast as the CPU allows or, with ``--realtime``, at recorded speed. A recording made by
+``loci run`` carries what the live run started from and ran with (metadata record ``loci``):
+the initial map (a resumed run), the pipeline parameters, the model's path and hash, and
+the odometry timeouts; the replay uses them, so it produces the graph and areas the live
+run ended with. The live run's last diagnostics message (``extra.final``) names the last
+scan it fed; later scans in the file (recorded while the agent was stopping) are skipped.
+
+Messages that do not decode are counted and skipped, as the live subscriptions do. A file
+whose writer crashed is replayed up to its last complete message, and the output says so.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import struct
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+log = logging.getLogger(__name__)
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+def register(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "replay",
+        help="run the agent's pipeline on a recording and print/write the graph and areas",
+        description=(
+            "Replay an MCAP recording of a robot (loci run --record, or loci record) through the "
+            "agent's pipeline: scans and odometry as recorded, the same odometry association, "
+            "place classification, navigation graph and areas. Runs as fast as possible unless "
+            "--realtime. A truncated file (crashed writer) is replayed up to its last complete "
+            "message."
+        ),
+        epilog="Example: loci replay run1.mcap --out-dir out/run1   (writes navgraph.json, graph.json, areas.json)",
+    )
+    p.add_argument("input", type=Path, metavar="IN.mcap", help="the recording")
+    p.add_argument("--realtime", action="store_true", help="pace the messages at recorded speed")
+    p.add_argument(
+        "--out-dir", type=Path, metavar="DIR", help="write navgraph.json, graph.json and areas.json here"
+    )
+    p.add_argument("--json", action="store_true", help="print the graph, the areas and the counters as JSON")
+    p.add_argument("--robot", help="the robot whose keys to replay (default: the recording's)")
+    p.add_argument(
+        "--model", type=Path, metavar="MODEL.npz", help="the place model (default: the recording's)"
+    )
+    p.add_argument(
+        "--config",
+        type=Path,
+        metavar="FILE",
+        help="take the pipeline parameters from this robot configuration instead of the recording",
+    )
+    p.add_argument(
+        "--fresh", action="store_true", help="start from an empty map even if the live run resumed one"
+    )
+    p.set_defaults(handler=_replay)
+
+
+@dataclass
+class ReplayOutcome:
+    """What :func:`replay_recording` did.
+
+    Attributes:
+        pipeline: the pipeline after the last message (its graph, areas, documents).
+        messages: scan and odometry messages read; invalid: those that did not decode.
+        skipped: scans after the live run's last one (see the module docstring).
+        truncated: the file ended without its footer (the writer crashed).
+        live: the live run's final counters, if the recording has them.
+        sync: the odometry association's counters.
+    """
+
+    pipeline: Any
+    messages: int = 0
+    scans: int = 0
+    odometry: int = 0
+    invalid: int = 0
+    skipped: int = 0
+    errors: int = 0
+    truncated: bool = False
+    resumed: bool = False
+    live: dict[str, Any] | None = None
+    sync: dict[str, int] = field(default_factory=dict)
+
+    def stats(self) -> dict[str, Any]:
+        return {
+            "messages": self.messages,
+            "scans": self.scans,
+            "odometry": self.odometry,
+            "invalid": self.invalid,
+            "skipped": self.skipped,
+            "errors": self.errors,
+            "processed": self.pipeline.scans,
+            "truncated": self.truncated,
+            "resumed": self.resumed,
+            "sync": self.sync,
+            "live": self.live,
+        }
+
+
+def read_recording_metadata(path: Path) -> dict[str, str]:
+    """The ``loci`` metadata record of a recording ({} if it has none)."""
+    from mcap.exceptions import McapError
+    from mcap.records import Channel, Message, Metadata, Schema
+    from mcap.stream_reader import StreamReader
+
+    from knowledge.errors import DataError
+
+    try:
+        with path.open("rb") as f:
+            if f.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+                raise DataError(f"{path}: not an MCAP file (it does not start with the MCAP magic bytes)")
+            f.seek(0)
+            for record in StreamReader(f, skip_magic=False).records:
+                if isinstance(record, Metadata) and record.name == "loci":
+                    return dict(record.metadata)
+                if isinstance(record, Message | Channel | Schema):
+                    break
+    except FileNotFoundError:
+        raise DataError(f"{path}: no such recording") from None
+    except (McapError, EOFError, ValueError, struct.error) as exc:
+        log.debug("%s: no metadata read (%s)", path, exc)
+    return {}
+
+
+def _survey(path: Path) -> tuple[set[str], dict[str, dict[str, Any]]]:
+    """A first pass: the topics, and the last ``extra.final`` of each diagnostics topic."""
+    from agent.bus.schemas import SCHEMAS
+    from agent.recording.replay import McapMessages
+    from knowledge.errors import ProtocolError
+
+    topics: set[str] = set()
+    finals: dict[str, dict[str, Any]] = {}
+    for msg in McapMessages(path):
+        topics.add(msg.topic)
+        if msg.topic.endswith("/diagnostics"):
+            try:
+                doc = SCHEMAS.decode(msg.data, "loci.diagnostics/1")
+            except ProtocolError:
+                continue
+            final = doc.get("extra", {}).get("final")
+            if isinstance(final, dict):
+                finals[msg.topic] = final
+    return topics, finals
+
+
+def replay_recording(
+    path: str | Path,
+    *,
+    robot: str | None = None,
+    model: Any = None,
+    params: Any = None,
+    speed: float | None = None,
+    fresh: bool = False,
+) -> ReplayOutcome:
+    """Replay a recording through the pipeline (see the module docstring).
+
+    Args:
+        path: the MCAP file.
+        robot: whose keys (default: the recording's metadata, else the only robot with scans).
+        model: a loaded :class:`~knowledge.places.model.PlaceModel` (default: the recording's
+            model file if it is there and has the recorded hash, else the bundled model).
+        params: :class:`~agent.pipeline.PipelineParams` (default: the recording's).
+        speed: None = as fast as possible, 1.0 = recorded speed.
+        fresh: ignore the initial map the live run resumed from.
+
+    Raises:
+        DataError: the file is missing or not MCAP, or has no scans of the robot.
+    """
+    from agent.bus.codecs import LASER_SCAN_CODEC, POSE_CODEC
+    from agent.bus.keys import RobotKeys
+    from agent.odom_sync import OdomSync
+    from agent.pipeline import Pipeline, PipelineParams
+    from agent.recording.replay import Replay
+    from agent.runtime import checked_decode, file_sha256
+    from knowledge.errors import DataError, ProtocolError
+    from knowledge.places.model import PlaceModel, default_model_path
+
+    p = Path(path)
+    meta = read_recording_metadata(p)
+    topics, finals = _survey(p)
+    robot = robot or meta.get("robot")
+    if not robot:
+        robots = sorted({t.split("/")[1] for t in topics if t.startswith("loci/") and t.endswith("/scan")})
+        if len(robots) != 1:
+            raise DataError(
+                f"{p}: name the robot to replay with --robot (scans of: {', '.join(robots) or 'none'})"
+            )
+        robot = robots[0]
+    keys = RobotKeys(robot)
+    if keys.scan not in topics:
+        raise DataError(
+            f"{p}: no {keys.scan} messages to replay (topics: {', '.join(sorted(topics)) or 'none'})"
+        )
+    if params is None:
+        params = (
+            PipelineParams.from_table(json.loads(meta["pipeline"]))
+            if meta.get("pipeline")
+            else PipelineParams()
+        )
+    if model is None:
+        recorded = Path(meta["model"]) if meta.get("model") else None
+        if recorded is not None and recorded.is_file() and file_sha256(recorded) == meta.get("model_sha256"):
+            model = PlaceModel.load(recorded)
+        else:
+            if recorded is not None:
+                log.warning(
+                    "%s: the recorded model %s is not available as recorded; using the bundled one",
+                    p,
+                    recorded,
+                )
+            model = PlaceModel.load(default_model_path())
+    initial = meta.get("initial_state")
+    outcome_resumed = bool(initial) and not fresh
+    if outcome_resumed:
+        assert initial is not None
+        pipeline = Pipeline.from_state(json.loads(initial), model, params)
+    else:
+        pipeline = Pipeline(model, params)
+    sync = OdomSync(max_wait=float(meta.get("max_wait", 0.2)), max_gap=float(meta.get("max_gap", 0.5)))
+    live = finals.get(keys.diagnostics)
+    last = live.get("last_scan_stamp") if live else None
+    out = ReplayOutcome(pipeline=pipeline, resumed=outcome_resumed, live=live)
+    replay = Replay(p, speed=speed, topics={keys.scan, keys.odom})
+
+    def feed(matched: list[Any]) -> None:
+        for m in matched:
+            try:
+                pipeline.process(m.scan, m.pose)
+            except Exception:  # as the live agent does: the scan is skipped
+                out.errors += 1
+                log.exception(
+                    "processing scan %d (stamp %.3f) failed; it is skipped", m.scan.seq, m.scan.stamp
+                )
+
+    for msg in replay:
+        out.messages += 1
+        now = msg.log_time_ns * 1e-9
+        try:
+            if msg.topic == keys.odom:
+                pose = checked_decode(POSE_CODEC, msg.zenoh_encoding, msg.data, msg.topic)
+                out.odometry += 1
+                feed(sync.add_odom(pose, now))
+                continue
+            scan = checked_decode(LASER_SCAN_CODEC, msg.zenoh_encoding, msg.data, msg.topic)
+        except ProtocolError:
+            out.invalid += 1
+            continue
+        if isinstance(last, int | float) and scan.stamp > last:
+            out.skipped += 1
+            continue
+        out.scans += 1
+        feed(sync.add_scan(scan, now))
+    sync.close()
+    out.truncated = replay.truncated
+    out.sync = sync.stats.as_dict()
+    return out
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from agent.config import load_config
+    from agent.pipeline import PipelineParams, areas_message, graph_message
+    from knowledge.fileio import atomic_write_text
+    from knowledge.navigation import persistence
+    from knowledge.places.model import PlaceModel
+
+    params = PipelineParams.from_config(load_config(args.config, env={})) if args.config else None
+    model = PlaceModel.load(args.model) if args.model else None
+    res = replay_recording(
+        args.input,
+        robot=args.robot,
+        model=model,
+        params=params,
+        speed=1.0 if args.realtime else None,
+        fresh=args.fresh,
+    )
+    pipeline = res.pipeline
+    doc = pipeline.state_document()
+    stamp = pipeline.last_stamp or 0.0
+    graph, areas = graph_message(doc, stamp), areas_message(doc, stamp)
+    if args.out_dir is not None:
+        atomic_write_text(args.out_dir / "navgraph.json", persistence.dumps(doc) + "\n")
+        atomic_write_text(args.out_dir / "graph.json", json.dumps(graph, indent=1) + "\n")
+        atomic_write_text(args.out_dir / "areas.json", json.dumps(areas, indent=1) + "\n")
+    if res.truncated:
+        print(
+            f"{args.input}: the recording ends without its footer (its writer stopped early); "
+            f"replayed up to its last complete message",
+            file=sys.stderr,
+        )
+    s = res.sync
+    summary = (
+        f"replayed {args.input}: {res.scans} scans, {res.odometry} odometry samples "
+        f"({res.invalid} invalid); {pipeline.scans} scans processed, {s['dropped']} dropped "
+        f"({s['no_odometry']} without odometry, {s['before_odometry']} before it, {s['odom_gap']} in gaps); "
+        f"{len(pipeline.graph)} nodes, {len(pipeline.areas.areas)} areas"
+        + (" (continuing the map the live run resumed)" if res.resumed else "")
+        + (f"; {res.skipped} scans after the live run's last one skipped" if res.skipped else "")
+    )
+    if args.json:
+        print(json.dumps({"graph": graph, "areas": areas, "stats": res.stats(), "truncated": res.truncated}))
+        print(summary, file=sys.stderr)
+    else:
+        print(summary)
+        for a in areas["areas"]:
+            print(f"  area {a['id']}: {a['label'] or '?'} ({len(a['nodes'])} nodes)")
+        if args.out_dir is not None:
+            print(f"wrote {args.out_dir}/navgraph.json, graph.json, areas.json")
+    return 0

@@ -1,0 +1,503 @@
+"""The agent's configuration: a TOML file made into frozen dataclasses.
+
+``loci run --config robot.toml`` reads one file; every key has a default, so an empty file
+(or none) is a valid configuration. Values are taken, highest precedence first, from
+
+1. the command line (``--robot``, ``--record``, ``--state-dir``, ``--model``),
+2. the environment (:data:`ENV_VARS`: ``LOCI_ROBOT``, ``LOCI_LASER_PORT``, ...),
+3. the file,
+4. the defaults below.
+
+Unknown sections and keys are a :class:`~knowledge.errors.ConfigError` that names them, as
+are values of the wrong type (``node_distance = "1"``) or out of range. Relative paths in
+the file (``places.model``, ``state.dir``, ``record.path``) are relative to the file's
+folder; from the environment or the command line, to the working directory.
+
+Sections (docs/agent.md lists every key):
+
+``[robot]`` name; ``[bus]`` :class:`~agent.bus.session.BusConfig`; ``[laser]`` the LMS on a
+serial port or scans from the bus, and the laser's mount on the robot; ``[odometry]`` how
+scans wait for odometry; ``[places]`` the place model and the label window N;
+``[navigation]`` (and ``[navigation.doorways]``) the graph and the doorway detector;
+``[local_map]``, ``[rear_beams]`` the 360° scan of a front laser (Sect. 3.5); ``[state]``
+where the graph persists; ``[record]`` an optional MCAP recording; ``[diagnostics]``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import tomllib
+import types
+import typing
+from collections.abc import Callable, Collection, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TypeVar
+
+from agent.bus.keys import robot_name
+from agent.bus.session import DEFAULT_AGENT_ENDPOINT, BusConfig
+from knowledge.errors import ConfigError
+from knowledge.metric.local_map import LocalMapParams
+from knowledge.metric.rear_beams import FullScanParams
+from knowledge.navigation.doorways import DoorwayParams
+from knowledge.navigation.graph import GraphParams
+
+T = TypeVar("T")
+
+#: LMS 2xx variants (scan angle in degrees, angular resolution in degrees) the driver reads.
+LMS_VARIANTS = ("180/1", "180/0.5", "100/1", "100/0.5", "100/0.25")
+
+
+def _split_list(text: str) -> list[str]:
+    return [p.strip() for p in text.split(",") if p.strip()]
+
+
+#: Environment variables and the key each sets: (section, key, parser of the text).
+#: An empty variable counts as unset. ``LOCI_CONFIG`` names the file when ``--config`` is absent.
+ENV_VARS: dict[str, tuple[str, str, Callable[[str], Any]]] = {
+    "LOCI_ROBOT": ("robot", "name", str),
+    "LOCI_LASER_PORT": ("laser", "port", str),
+    "LOCI_LASER_SOURCE": ("laser", "source", str),
+    "LOCI_MODEL": ("places", "model", str),
+    "LOCI_STATE_DIR": ("state", "dir", str),
+    "LOCI_RECORD": ("record", "path", str),
+    "LOCI_BUS_MODE": ("bus", "mode", str),
+    "LOCI_BUS_LISTEN": ("bus", "listen", _split_list),
+    "LOCI_BUS_CONNECT": ("bus", "connect", _split_list),
+}
+CONFIG_ENV = "LOCI_CONFIG"
+
+# keys holding paths, resolved against the config file's folder when they come from it
+_PATH_KEYS = {("places", "model"), ("state", "dir"), ("record", "path")}
+
+
+# ---------------------------------------------------------------------------- sections
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """``[robot]``: ``name`` is the second chunk of every key (default: the host name)."""
+
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "name", robot_name(self.name or None))
+
+
+@dataclass(frozen=True)
+class Mount:
+    """``[laser.mount]``: the laser's pose on the robot: ``x``, ``y`` metres (x forward,
+    y left of the odometry reference point), ``yaw`` degrees (counter-clockwise)."""
+
+    x: float = 0.0
+    y: float = 0.0
+    yaw: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not all(math.isfinite(v) for v in (self.x, self.y, self.yaw)):
+            raise ValueError(f"the mount pose must be finite, got ({self.x}, {self.y}, {self.yaw})")
+
+    @property
+    def pose(self) -> tuple[float, float, float]:
+        """``(x, y, yaw)`` in metres, metres, radians."""
+        return (self.x, self.y, math.radians(self.yaw))
+
+
+@dataclass(frozen=True)
+class LaserConfig:
+    """``[laser]``: where scans come from.
+
+    Attributes:
+        source: ``"lms"`` (a SICK LMS 2xx on ``port``, read by the agent, which publishes each
+            scan on ``loci/<robot>/scan``) or ``"bus"`` (subscribe ``loci/<robot>/scan``).
+            Default: ``"lms"`` when ``port`` is set, else ``"bus"``.
+        port: the scanner's serial device or pyserial URL (``/dev/ttyUSB0``,
+            ``socket://host:4001``, the path ``loci sim lms`` prints).
+        baud: session baud rate (9600, 19200, 38400, 500000); omitted: 500000 if the port
+            takes it, else 38400.
+        variant: ``"ANGLE/RESOLUTION"`` in degrees (``"180/0.5"``), or ``"keep"`` (the
+            scanner's own). The field of view the pipeline uses is read from each scan.
+        frame_id: the scans' frame name.
+        queue_size: scans the driver keeps for a busy agent before dropping the oldest.
+        timeout: seconds per request to the scanner.
+        mount: the laser's pose on the robot.
+    """
+
+    source: str = ""
+    port: str | None = None
+    baud: int | None = None
+    variant: str = "180/0.5"
+    frame_id: str = "laser"
+    queue_size: int = 64
+    timeout: float = 1.0
+    mount: Mount = field(default_factory=Mount)
+
+    def __post_init__(self) -> None:
+        source = self.source or ("lms" if self.port else "bus")
+        object.__setattr__(self, "source", source)
+        if source not in ("lms", "bus"):
+            raise ValueError(f"source must be 'lms' (a scanner on 'port') or 'bus', got {source!r}")
+        if source == "lms" and not self.port:
+            raise ValueError(
+                "source 'lms' needs 'port', the scanner's serial device, e.g. port = '/dev/ttyUSB0'"
+            )
+        if self.variant != "keep" and self.variant not in LMS_VARIANTS:
+            raise ValueError(
+                f"variant must be one of {', '.join(LMS_VARIANTS)} or 'keep', got {self.variant!r}"
+            )
+        if self.baud is not None and self.baud not in (9600, 19200, 38400, 500000):
+            raise ValueError(f"baud must be 9600, 19200, 38400 or 500000, got {self.baud}")
+        if self.queue_size < 1:
+            raise ValueError(f"queue_size must be >= 1 scan, got {self.queue_size}")
+        if not self.timeout > 0:
+            raise ValueError(f"timeout must be > 0 seconds, got {self.timeout}")
+
+    @property
+    def angle_resolution(self) -> tuple[int | None, float | None]:
+        """``(angle, resolution)`` in degrees for the driver; ``(None, None)`` keeps the scanner's."""
+        if self.variant == "keep":
+            return None, None
+        a, r = self.variant.split("/")
+        return int(a), float(r)
+
+
+@dataclass(frozen=True)
+class OdometryConfig:
+    """``[odometry]``: how each scan gets the robot's pose at its stamp.
+
+    Attributes:
+        source: ``"bus"``: subscribe ``loci/<robot>/odom`` (the only source so far).
+        max_wait: seconds a scan waits for odometry newer than its stamp; then it is dropped
+            (counted as ``no_odometry``).
+        max_gap: seconds; a scan between two odometry samples farther apart than this is
+            dropped (``odom_gap``) instead of interpolated across the gap.
+    """
+
+    source: str = "bus"
+    max_wait: float = 0.2
+    max_gap: float = 0.5
+
+    def __post_init__(self) -> None:
+        if self.source != "bus":
+            raise ValueError(f"source must be 'bus' (loci/<robot>/odom), got {self.source!r}")
+        if not (math.isfinite(self.max_wait) and self.max_wait > 0):
+            raise ValueError(f"max_wait must be > 0 seconds, got {self.max_wait}")
+        if not (math.isfinite(self.max_gap) and self.max_gap > 0):
+            raise ValueError(f"max_gap must be > 0 seconds, got {self.max_gap}")
+
+
+@dataclass(frozen=True)
+class PlacesConfig:
+    """``[places]``: ``model`` (a ``.npz`` path, or ``"default"`` for the bundled one) and
+    ``window``, the N last scan labels a node's majority vote counts."""
+
+    model: str = "default"
+    window: int = 10
+
+    def __post_init__(self) -> None:
+        if self.window < 1:
+            raise ValueError(f"window must be >= 1 label, got {self.window}")
+
+    @property
+    def model_path(self) -> Path:
+        from knowledge.places.model import default_model_path
+
+        return default_model_path() if self.model == "default" else Path(self.model)
+
+
+@dataclass(frozen=True)
+class StateConfig:
+    """``[state]``: ``dir`` holds ``navgraph.json`` (default ``$XDG_STATE_HOME/genius-loci/<robot>``);
+    it is written at most every ``save_interval`` seconds while the graph changes, and on
+    shutdown; ``resume = false`` starts a new map (the old file is replaced at the first save)."""
+
+    dir: str = ""
+    save_interval: float = 2.0
+    resume: bool = True
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.save_interval) and self.save_interval >= 0):
+            raise ValueError(f"save_interval must be >= 0 seconds, got {self.save_interval}")
+
+    @property
+    def path(self) -> Path:
+        """The state file."""
+        return Path(self.dir) / "navgraph.json"
+
+
+@dataclass(frozen=True)
+class RecordConfig:
+    """``[record]``: ``path`` of an MCAP recording of ``loci/<robot>/**`` (none when unset;
+    ``strftime`` codes such as ``%Y%m%d-%H%M%S`` are expanded at start), flushed every
+    ``flush_interval`` seconds; an existing file is an error unless ``overwrite``."""
+
+    path: str | None = None
+    flush_interval: float = 1.0
+    overwrite: bool = False
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.flush_interval) and self.flush_interval > 0):
+            raise ValueError(f"flush_interval must be > 0 seconds, got {self.flush_interval}")
+
+
+@dataclass(frozen=True)
+class DiagnosticsConfig:
+    """``[diagnostics]``: ``period``, seconds between ``loci/<robot>/diagnostics`` messages."""
+
+    period: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.period) and self.period > 0):
+            raise ValueError(f"period must be > 0 seconds, got {self.period}")
+
+
+@dataclass(frozen=True)
+class AgentConfig:
+    """The whole configuration (see the module docstring); build it with :func:`load_config`."""
+
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    bus: BusConfig = field(default_factory=lambda: BusConfig(listen=(DEFAULT_AGENT_ENDPOINT,)))
+    laser: LaserConfig = field(default_factory=LaserConfig)
+    odometry: OdometryConfig = field(default_factory=OdometryConfig)
+    places: PlacesConfig = field(default_factory=PlacesConfig)
+    navigation: GraphParams = field(default_factory=GraphParams)
+    doorways: DoorwayParams = field(default_factory=DoorwayParams)
+    local_map: LocalMapParams = field(default_factory=LocalMapParams)
+    rear_beams: FullScanParams = field(default_factory=FullScanParams)
+    state: StateConfig = field(default_factory=StateConfig)
+    record: RecordConfig = field(default_factory=RecordConfig)
+    diagnostics: DiagnosticsConfig = field(default_factory=DiagnosticsConfig)
+    file: Path | None = None
+
+    @property
+    def robot_name(self) -> str:
+        return self.robot.name
+
+
+# ---------------------------------------------------------------------------- typed tables
+
+
+def _type_name(tp: Any) -> str:
+    return {bool: "true or false", int: "an integer", float: "a number", str: "a string"}.get(
+        tp, getattr(tp, "__name__", str(tp))
+    )
+
+
+def _coerce(value: Any, tp: Any, where: str) -> Any:
+    """``value`` (from TOML) as type ``tp`` (a field's annotation), or a ConfigError."""
+    origin = typing.get_origin(tp)
+    if origin in (types.UnionType, typing.Union):
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        if value is None:
+            return None
+        return _coerce(value, args[0], where)
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where} must be true or false, got {value!r}")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{where} must be an integer, got {value!r}")
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(f"{where} must be a number, got {value!r}")
+        return float(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{where} must be a string, got {value!r}")
+        return value
+    if origin is tuple:
+        inner = typing.get_args(tp)[0]
+        if not isinstance(value, list | tuple):
+            raise ConfigError(f"{where} must be a list of {_type_name(inner)}s, got {value!r}")
+        return tuple(_coerce(v, inner, f"{where}[{i}]") for i, v in enumerate(value))
+    if dataclasses.is_dataclass(tp) and isinstance(tp, type):
+        if not isinstance(value, Mapping):
+            raise ConfigError(f"{where} must be a table, e.g. [{where}]")
+        return build_dataclass(tp, value, where)
+    raise ConfigError(f"{where}: unsupported setting type {tp!r}")  # pragma: no cover - a bug
+
+
+def build_dataclass(cls: type[T], table: Mapping[str, Any], where: str, *, skip: Collection[str] = ()) -> T:
+    """A frozen dataclass from a TOML table: every key must be a field (except ``skip``),
+    of the field's type; the dataclass's own checks become ConfigErrors naming ``where``."""
+    if not dataclasses.is_dataclass(cls):
+        raise TypeError(f"{cls!r} is not a dataclass")
+    hints = typing.get_type_hints(cls)
+    known = [f.name for f in dataclasses.fields(cls) if f.init and f.name not in skip]
+    kwargs: dict[str, Any] = {}
+    for key, value in table.items():
+        if key not in known:
+            raise ConfigError(f"[{where}]: unknown key {key!r} (known: {', '.join(sorted(known))})")
+        kwargs[key] = _coerce(value, hints[key], f"{where}.{key}")
+    try:
+        return cls(**kwargs)
+    except ConfigError:
+        raise
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"[{where}]: {exc}") from exc
+
+
+def dataclass_table(obj: Any) -> dict[str, Any]:
+    """The fields of a (nested) dataclass as a plain dict (the inverse of :func:`build_dataclass`)."""
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(obj):
+        v = getattr(obj, f.name)
+        if dataclasses.is_dataclass(v) and not isinstance(v, type):
+            v = dataclass_table(v)
+        elif isinstance(v, tuple):
+            v = list(v)
+        elif isinstance(v, Path):
+            v = str(v)
+        out[f.name] = v
+    return out
+
+
+# ---------------------------------------------------------------------------- loading
+
+_SECTIONS = (
+    "robot",
+    "bus",
+    "laser",
+    "odometry",
+    "places",
+    "navigation",
+    "local_map",
+    "rear_beams",
+    "state",
+    "record",
+    "diagnostics",
+)
+
+
+def default_state_dir(robot: str, env: Mapping[str, str] | None = None) -> Path:
+    """``$XDG_STATE_HOME/genius-loci/<robot>`` (``~/.local/state/...`` without XDG_STATE_HOME)."""
+    env = os.environ if env is None else env
+    base = env.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
+    return Path(base) / "genius-loci" / robot
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """The tables of a TOML file; a missing file or bad TOML is a ConfigError."""
+    p = Path(path)
+    try:
+        with p.open("rb") as f:
+            return tomllib.load(f)
+    except FileNotFoundError:
+        raise ConfigError(f"{p}: no such configuration file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{p}: not valid TOML: {exc}") from exc
+
+
+def load_config(
+    path: str | Path | None = None,
+    *,
+    env: Mapping[str, str] | None = None,
+    overrides: Mapping[str, Any] | None = None,
+    table: Mapping[str, Any] | None = None,
+) -> AgentConfig:
+    """Read the configuration: ``overrides`` > ``env`` > the file (or ``table``) > defaults.
+
+    Args:
+        path: the TOML file; None: ``$LOCI_CONFIG`` if set, else no file.
+        env: the environment (default ``os.environ``); see :data:`ENV_VARS`.
+        overrides: command-line values as ``{"section.key": value}`` (None values are ignored).
+        table: the file's content already parsed (instead of ``path``).
+
+    Raises:
+        ConfigError: unknown sections or keys, wrong types, bad values (the message names them).
+    """
+    env = os.environ if env is None else env
+    if path is None and table is None and env.get(CONFIG_ENV):
+        path = env[CONFIG_ENV]
+    file = Path(path) if path is not None else None
+    raw: dict[str, Any] = dict(read_toml(file) if file is not None else (table or {}))
+    origin: dict[tuple[str, str], str] = {}
+    data: dict[str, dict[str, Any]] = {}
+    for section, content in raw.items():
+        if section not in _SECTIONS:
+            raise ConfigError(f"unknown section [{section}] (known: {', '.join(_SECTIONS)})")
+        if not isinstance(content, Mapping):
+            raise ConfigError(f"{section} must be a table: write [{section}] and its keys below it")
+        data[section] = dict(content)
+        for key in content:
+            origin[(section, key)] = str(file) if file else "the configuration"
+    base = file.parent if file is not None else None
+    if base is not None:
+        for section, key in _PATH_KEYS:
+            v = data.get(section, {}).get(key)
+            if isinstance(v, str) and v and not (section == "places" and v == "default"):
+                p = Path(v).expanduser()
+                data[section][key] = str(p if p.is_absolute() else base / p)
+    for var, (section, key, parse) in ENV_VARS.items():
+        text = env.get(var)
+        if text:
+            data.setdefault(section, {})[key] = parse(text)
+            origin[(section, key)] = var
+    for dotted, value in (overrides or {}).items():
+        if value is None:
+            continue
+        section, _, key = dotted.partition(".")
+        if section not in _SECTIONS or not key:
+            raise ValueError(f"override {dotted!r} must be 'section.key' with a known section")
+        data.setdefault(section, {})[key] = str(value) if isinstance(value, Path) else value
+        origin[(section, key)] = f"the command line ({dotted})"
+    try:
+        return _build(data, file, env)
+    except ConfigError as exc:
+        raise ConfigError(_with_origin(str(exc), origin)) from None
+
+
+def _with_origin(message: str, origin: Mapping[tuple[str, str], str]) -> str:
+    """Append where a value came from when it was not the file (an environment variable...)."""
+    for (section, key), where in origin.items():
+        named = f"{section}.{key}" in message or (f"[{section}]" in message and key in message)
+        if named and where.startswith(("LOCI_", "the command line")):
+            return f"{message} (set by {where})"
+    return message
+
+
+def _build(data: Mapping[str, Mapping[str, Any]], file: Path | None, env: Mapping[str, str]) -> AgentConfig:
+    def sec(name: str) -> Mapping[str, Any]:
+        return data.get(name, {})
+
+    robot = build_dataclass(RobotConfig, sec("robot"), "robot")
+    bus_table = dict(sec("bus"))
+    if "listen" not in bus_table:
+        # the agent listens where `loci record` looks for it; a router's client does not listen
+        bus_table["listen"] = [DEFAULT_AGENT_ENDPOINT] if bus_table.get("mode", "peer") == "peer" else []
+    try:
+        bus = BusConfig.from_mapping(bus_table, where="bus")
+    except TypeError as exc:  # pragma: no cover - from_mapping checks the types it knows
+        raise ConfigError(f"[bus]: {exc}") from exc
+    places = build_dataclass(PlacesConfig, sec("places"), "places")
+    nav = dict(sec("navigation"))
+    doors = nav.pop("doorways", {})
+    if not isinstance(doors, Mapping):
+        raise ConfigError("navigation.doorways must be a table: [navigation.doorways]")
+    if "window" in nav:
+        raise ConfigError("[navigation]: unknown key 'window' (the label window N is places.window)")
+    graph = build_dataclass(GraphParams, {**nav, "window": places.window}, "navigation")
+    state = build_dataclass(StateConfig, sec("state"), "state")
+    if not state.dir:
+        state = dataclasses.replace(state, dir=str(default_state_dir(robot.name, env)))
+    return AgentConfig(
+        robot=robot,
+        bus=bus,
+        laser=build_dataclass(LaserConfig, sec("laser"), "laser"),
+        odometry=build_dataclass(OdometryConfig, sec("odometry"), "odometry"),
+        places=places,
+        navigation=graph,
+        doorways=build_dataclass(DoorwayParams, doors, "navigation.doorways"),
+        local_map=build_dataclass(LocalMapParams, sec("local_map"), "local_map"),
+        rear_beams=build_dataclass(
+            FullScanParams, sec("rear_beams"), "rear_beams", skip=("n_beams", "max_range")
+        ),
+        state=state,
+        record=build_dataclass(RecordConfig, sec("record"), "record"),
+        diagnostics=build_dataclass(DiagnosticsConfig, sec("diagnostics"), "diagnostics"),
+        file=file,
+    )

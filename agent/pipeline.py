@@ -1,0 +1,397 @@
+"""The agent's per-scan core: synchronous, deterministic, no I/O.
+
+``Pipeline.process(scan, pose)`` takes one laser scan and the robot's odometry pose at the
+scan's stamp (:mod:`agent.odom_sync`) and runs, in this order:
+
+1. the laser's pose: the robot pose composed with the laser's mount (every position below,
+   graph nodes included, is the laser's, in the odometry frame);
+2. a front laser (less than a full turn): its beam endpoints go into the sparse local map
+   and the 360° scan gets its rear beams from that map, beams without a hit interpolated
+   (Sect. 3.5, :func:`~knowledge.metric.rear_beams.full_scan`); a 360° laser is only
+   resampled to the model's beams;
+3. the place model's histogram over the classes (probabilistic decision list, Sect. 4.3);
+   the label is its most probable class;
+4. the doorway detector on the obstacle points around the robot (the local map's for a
+   front laser, the scan's for a 360° laser);
+5. the navigation graph (Sect. 7.2.2): node dropping, last-N label window and majority
+   vote, doorway nodes;
+6. the topological areas (Sect. 7.2.3) and their change events.
+
+The result depends only on the sequence of ``(scan, pose)`` inputs (and the model and
+parameters): a live run and a replay of its recording build the same graph.
+
+Documents: :meth:`Pipeline.state_document` is the persisted ``loci.navgraph/1`` document
+(:mod:`knowledge.navigation.persistence`, graph and areas with votes and ids);
+:func:`graph_message` and :func:`areas_message` turn such a document into the slim
+``loci.graph/1`` and ``loci.areas/1`` messages the bus carries; :func:`place_message` is
+the ``loci.place/1`` message of one step. :meth:`Pipeline.from_state` resumes from a
+persisted document.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from agent.config import AgentConfig, build_dataclass, dataclass_table
+from drivers.messages import LaserScan, Pose2D
+from knowledge.metric.local_map import LocalMap, LocalMapParams
+from knowledge.metric.rear_beams import FullScanParams, full_scan
+from knowledge.navigation import persistence
+from knowledge.navigation.doorways import Doorway, DoorwayDetector, DoorwayParams, scan_points
+from knowledge.navigation.graph import DOORWAY, GraphParams, GraphUpdate, NavigationGraph
+from knowledge.places.model import PlaceModel
+from knowledge.topology.areas import AreaEvent, AreaMap
+
+__all__ = [
+    "Pipeline",
+    "PipelineParams",
+    "StepResult",
+    "areas_message",
+    "graph_message",
+    "place_message",
+]
+
+TWO_PI = 2.0 * math.pi
+
+
+@dataclass(frozen=True)
+class PipelineParams:
+    """Everything besides the model that the pipeline's result depends on.
+
+    Attributes:
+        mount: the laser's pose on the robot ``(x, y, yaw)``: metres, metres, radians.
+        local_map: the sparse local map of a front laser.
+        rear_beams: rear-beam simulation (``n_beams`` and ``max_range`` are the model's).
+        graph: the navigation graph (node distance d, label window N, ...).
+        doorways: the doorway detector.
+    """
+
+    mount: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    local_map: LocalMapParams = field(default_factory=LocalMapParams)
+    rear_beams: FullScanParams = field(default_factory=FullScanParams)
+    graph: GraphParams = field(default_factory=GraphParams)
+    doorways: DoorwayParams = field(default_factory=DoorwayParams)
+
+    def __post_init__(self) -> None:
+        m = tuple(float(v) for v in self.mount)
+        if len(m) != 3 or not all(math.isfinite(v) for v in m):
+            raise ValueError(f"mount must be a finite (x [m], y [m], yaw [rad]), got {self.mount!r}")
+        object.__setattr__(self, "mount", m)
+
+    @classmethod
+    def from_config(cls, config: AgentConfig) -> PipelineParams:
+        return cls(
+            mount=config.laser.mount.pose,
+            local_map=config.local_map,
+            rear_beams=config.rear_beams,
+            graph=config.navigation,
+            doorways=config.doorways,
+        )
+
+    def to_table(self) -> dict[str, Any]:
+        """Plain JSON-able values (stored in recordings so a replay uses the same parameters)."""
+        return {
+            "mount": list(self.mount),
+            "local_map": dataclass_table(self.local_map),
+            "rear_beams": dataclass_table(self.rear_beams),
+            "graph": dataclass_table(self.graph),
+            "doorways": dataclass_table(self.doorways),
+        }
+
+    @classmethod
+    def from_table(cls, table: Mapping[str, Any]) -> PipelineParams:
+        """The inverse of :meth:`to_table` (unknown keys are a ConfigError)."""
+        from knowledge.errors import ConfigError
+
+        known = {"mount", "local_map", "rear_beams", "graph", "doorways"}
+        unknown = sorted(set(table) - known)
+        if unknown:
+            raise ConfigError(f"pipeline parameters: unknown key {unknown[0]!r}")
+        mount = table.get("mount", [0.0, 0.0, 0.0])
+        if not isinstance(mount, list | tuple) or len(mount) != 3:
+            raise ConfigError(f"pipeline parameters: mount must be [x, y, yaw], got {mount!r}")
+        return cls(
+            mount=(float(mount[0]), float(mount[1]), float(mount[2])),
+            local_map=build_dataclass(LocalMapParams, table.get("local_map", {}), "local_map"),
+            rear_beams=build_dataclass(FullScanParams, table.get("rear_beams", {}), "rear_beams"),
+            graph=build_dataclass(GraphParams, table.get("graph", {}), "graph"),
+            doorways=build_dataclass(DoorwayParams, table.get("doorways", {}), "doorways"),
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class StepResult:
+    """What one :meth:`Pipeline.process` did.
+
+    Attributes:
+        scan: the input scan.
+        pose: the laser's pose in the odometry frame at the scan's stamp.
+        ranges: ``(n,)`` float32 the 360° scan the model classified (beam ``i`` at ``i·2π/n``
+            from the laser's heading, metres).
+        label: the most probable class.
+        probabilities: class → probability (the model's histogram).
+        doorway: a doorway the robot just passed through, or None.
+        in_opening: the robot is inside a door-like opening now.
+        update: what the navigation graph did.
+        events: the areas' change events.
+    """
+
+    scan: LaserScan
+    pose: Pose2D
+    ranges: np.ndarray
+    label: str
+    probabilities: Mapping[str, float]
+    doorway: Doorway | None
+    in_opening: bool
+    update: GraphUpdate
+    events: tuple[AreaEvent, ...]
+
+    @property
+    def stamp(self) -> float:
+        return self.scan.stamp
+
+    @property
+    def node(self) -> int | None:
+        """The navigation node the robot was last at."""
+        return self.update.current
+
+    @property
+    def graph_changed(self) -> bool:
+        """Whether the ``loci.graph/1`` message changed (nodes, edges, labels, a doorway's width)."""
+        return self.update.changed or self.doorway is not None
+
+    @property
+    def areas_changed(self) -> bool:
+        """Whether the areas may have changed (they are recomputed from the graph)."""
+        return self.update.changed or bool(self.events)
+
+    @property
+    def state_changed(self) -> bool:
+        """Whether the persisted document changed beyond the label window (votes, visits)."""
+        u = self.update
+        return bool(u.added or u.reached or u.relabelled or u.edges) or self.doorway is not None
+
+
+def compose(pose: Pose2D, mount: tuple[float, float, float]) -> np.ndarray:
+    """``(3,)`` the laser's odometry-frame pose: ``pose`` ⊕ ``mount``."""
+    c, s = math.cos(pose.theta), math.sin(pose.theta)
+    mx, my, myaw = mount
+    th = pose.theta + myaw
+    return np.array(
+        [pose.x + c * mx - s * my, pose.y + s * mx + c * my, math.atan2(math.sin(th), math.cos(th))]
+    )
+
+
+def is_full_turn(scan: LaserScan) -> bool:
+    """Whether the scan's beams cover the full turn (a 360° laser)."""
+    return scan.n_beams * scan.angle_increment >= TWO_PI - 1e-6
+
+
+class Pipeline:
+    """The per-scan chain (see the module docstring).
+
+    Args:
+        model: the place model; its ``scan`` parameters fix the 360° scan's beams and range.
+        params: everything else.
+        graph, areas: a graph (and its areas) to continue (see :meth:`from_state`).
+    """
+
+    def __init__(
+        self,
+        model: PlaceModel,
+        params: PipelineParams | None = None,
+        *,
+        graph: NavigationGraph | None = None,
+        areas: AreaMap | None = None,
+    ) -> None:
+        prm = params or PipelineParams()
+        self.model = model
+        self.params = replace(
+            prm,
+            rear_beams=replace(prm.rear_beams, n_beams=model.scan.n_beams, max_range=model.scan.max_range),
+        )
+        self.classes = tuple(model.classes)
+        self.local_map = LocalMap(self.params.local_map)
+        self.detector = DoorwayDetector(self.params.doorways)
+        self.graph = graph if graph is not None else NavigationGraph(self.params.graph)
+        self.areas = areas if areas is not None else AreaMap()
+        self.areas.update(self.graph)
+        self.scans = 0
+        self.last_stamp: float | None = None
+        self._angles: tuple[tuple[int, float, float], np.ndarray] | None = None
+
+    # ------------------------------------------------------------------ per scan
+    def _beam_angles(self, scan: LaserScan) -> np.ndarray:
+        key = (scan.n_beams, scan.angle_min, scan.angle_increment)
+        if self._angles is None or self._angles[0] != key:
+            self._angles = (key, scan.angles)
+        return self._angles[1]
+
+    def process(self, scan: LaserScan, pose: Pose2D) -> StepResult:
+        """Run the chain on one scan and the robot's odometry pose at its stamp.
+
+        Raises:
+            ValueError: the scan is older than the previous one (scans must come in stamp order).
+        """
+        if self.last_stamp is not None and scan.stamp < self.last_stamp:
+            raise ValueError(
+                f"scan stamps must not go back in time ({scan.stamp} after {self.last_stamp}); "
+                "associate scans with odometry through agent.odom_sync.OdomSync"
+            )
+        sensor = compose(pose, self.params.mount)
+        angles = self._beam_angles(scan)
+        fsp = self.params.rear_beams
+        if is_full_turn(scan):
+            ranges = full_scan(
+                scan.ranges, angles, range_max=scan.range_max, params=fsp, range_min=scan.range_min
+            )
+            points = scan_points(scan.ranges, angles, range_max=scan.range_max, range_min=scan.range_min)
+        else:
+            self.local_map.add(
+                scan.ranges,
+                angles,
+                sensor,
+                stamp=scan.stamp,
+                range_max=scan.range_max,
+                range_min=scan.range_min,
+            )
+            ranges = full_scan(
+                scan.ranges,
+                angles,
+                range_max=scan.range_max,
+                pose=sensor,
+                local_map=self.local_map,
+                params=fsp,
+                range_min=scan.range_min,
+            )
+            points = self.local_map.points_in_robot_frame(sensor)
+        proba = np.clip(self.model.predict_proba_scans(ranges)[0], 0.0, 1.0)
+        label = self.classes[int(np.argmax(proba))]
+        doorway = self.detector.update(points, sensor, scan.stamp)
+        in_opening = self.detector.passing
+        upd = self.graph.update(sensor, label, doorway, in_opening=in_opening, ranges=ranges)
+        events = tuple(self.areas.update(self.graph))
+        self.scans += 1
+        self.last_stamp = scan.stamp
+        return StepResult(
+            scan=scan,
+            pose=Pose2D(
+                float(sensor[0]), float(sensor[1]), float(sensor[2]), stamp=scan.stamp, frame_id=pose.frame_id
+            ),
+            ranges=ranges,
+            label=label,
+            probabilities={c: float(p) for c, p in zip(self.classes, proba, strict=True)},
+            doorway=doorway,
+            in_opening=in_opening,
+            update=upd,
+            events=events,
+        )
+
+    # ------------------------------------------------------------------ documents
+    def state_document(self, meta: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        """The ``loci.navgraph/1`` document of the graph and areas (what is persisted)."""
+        info: dict[str, Any] = {"scans": self.scans}
+        if self.last_stamp is not None:
+            info["stamp"] = self.last_stamp
+        return persistence.to_document(self.graph, self.areas, meta={**info, **(meta or {})})
+
+    @classmethod
+    def from_state(
+        cls, document: Mapping[str, Any], model: PlaceModel, params: PipelineParams | None = None
+    ) -> Pipeline:
+        """A pipeline continuing the graph and areas of a ``loci.navgraph/1`` document.
+
+        The graph keeps its nodes, votes, label window and the node the robot was last at;
+        the local map and the doorway detector start empty. The parameters are ``params``'
+        (the configuration wins over those stored in the document).
+
+        Raises:
+            ProtocolError: the document is malformed.
+        """
+        prm = params or PipelineParams()
+        graph, areas = persistence.from_document(dict(document))
+        graph.params = prm.graph
+        graph.recent = deque(graph.recent, maxlen=prm.graph.window)
+        return cls(model, prm, graph=graph, areas=areas)
+
+    def messages(self, stamp: float | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
+        """The ``loci.graph/1`` and ``loci.areas/1`` messages of the current state."""
+        doc = self.state_document()
+        when = stamp if stamp is not None else (self.last_stamp or 0.0)
+        return graph_message(doc, when), areas_message(doc, when)
+
+    @staticmethod
+    def warm_up(model: PlaceModel, params: PipelineParams | None = None) -> None:
+        """Run a throwaway pipeline on synthetic front and 360° scans, so the compiled kernels
+        are ready before the first real scan (the first call of each takes a while)."""
+        p = Pipeline(model, params)
+        for i, (n, fov) in enumerate(((361, math.pi), (360, TWO_PI))):
+            inc = fov / (n - 1) if fov < TWO_PI else fov / n
+            angle_min = -fov / 2 if fov < TWO_PI else 0.0
+            a = angle_min + np.arange(n) * inc
+            ranges = np.minimum(4.0 / np.maximum(np.abs(np.cos(a)), 0.2), 10.0).astype(np.float32)
+            scan = LaserScan(float(i), i, "laser", angle_min, inc, 30.0, ranges)
+            p.process(scan, Pose2D(0.1 * i, 0.0, 0.0, stamp=float(i)))
+
+
+# ---------------------------------------------------------------------------- messages
+
+
+def _num(v: float | None) -> float | None:
+    return None if v is None else round(float(v), 6)
+
+
+def graph_message(document: Mapping[str, Any], stamp: float, frame_id: str = "odom") -> dict[str, Any]:
+    """The slim ``loci.graph/1`` message of a ``loci.navgraph/1`` document (no votes, no ids counter)."""
+    nodes = []
+    for n in document["nodes"]:
+        node: dict[str, Any] = {
+            "id": int(n["id"]),
+            "x": _num(n["x"]),
+            "y": _num(n["y"]),
+            "kind": n["kind"],
+            "label": n["label"],
+        }
+        if n["kind"] == DOORWAY:
+            node["width"] = _num(n.get("width"))
+            node["orientation"] = _num(n.get("orientation"))
+        nodes.append(node)
+    edges = [[int(e["source"]), int(e["target"])] for e in document["edges"]]
+    return {
+        "schema": "loci.graph/1",
+        "stamp": float(stamp),
+        "frame_id": frame_id,
+        "nodes": nodes,
+        "edges": edges,
+    }
+
+
+def areas_message(document: Mapping[str, Any], stamp: float) -> dict[str, Any]:
+    """The ``loci.areas/1`` message of a ``loci.navgraph/1`` document (no areas yet: none)."""
+    areas = document.get("areas") or {"areas": []}
+    return {
+        "schema": "loci.areas/1",
+        "stamp": float(stamp),
+        "areas": [
+            {"id": int(a["id"]), "label": a["label"], "nodes": sorted(int(k) for k in a["nodes"])}
+            for a in areas["areas"]
+            if a["nodes"]
+        ],
+    }
+
+
+def place_message(result: StepResult) -> dict[str, Any]:
+    """The ``loci.place/1`` message of one step."""
+    return {
+        "schema": "loci.place/1",
+        "stamp": result.stamp,
+        "label": result.label,
+        "probabilities": dict(result.probabilities),
+        "node": result.node,
+    }

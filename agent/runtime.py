@@ -1,0 +1,630 @@
+"""The running agent: the laser, odometry, the per-scan pipeline and the bus, in one event loop.
+
+``await Agent(config).run(stop)`` (``loci run``) does, in order:
+
+1. load the place model and, unless ``state.resume`` is off, the persisted graph
+   (``<state.dir>/navgraph.json``); compile the pipeline's kernels (a throwaway run);
+2. open the Zenoh session (closed in ``finally``, whatever happens);
+3. start the recording, if configured: a :class:`~agent.recording.recorder.Recorder` on the
+   same session subscribing ``loci/<robot>/**`` (a session hears its own publications), with
+   the initial state, the pipeline parameters and the model's hash in the file's metadata;
+4. declare the publishers, the queryables ``state/graph``, ``state/areas``, ``state/place``
+   (answered from :class:`~agent.bus.queryable.StateCell` s) and the odometry subscription;
+5. open the laser: an LMS 2xx on ``laser.port`` (each scan it gives is published on
+   ``loci/<robot>/scan`` and then processed, so the recording holds exactly the scans the
+   agent saw) or a subscription to ``loci/<robot>/scan``;
+6. run until ``stop`` is set (SIGINT/SIGTERM in ``loci run``) or a task fails.
+
+Tasks (one event loop, one thread for the core): the **laser** task (driver or bus), the
+**odometry** task (bus), the **housekeeping** task (every 50 ms: expire scans that waited
+too long for odometry, save the state when it changed and ``state.save_interval`` passed),
+the **diagnostics** task (every ``diagnostics.period``) and the **recorder** task. Both
+sensor tasks feed one :class:`~agent.odom_sync.OdomSync`; each scan it releases is
+processed at once, synchronously (about 1 ms), by the :class:`~agent.pipeline.Pipeline`, in
+stamp order. Before a scan enters the sync, the odometry already queued is taken first, so
+arrival order is kept across the two streams.
+
+Queues: the driver keeps ``laser.queue_size`` scans (drop-oldest, counted); the bus
+subscriptions keep 256 samples each (drop-oldest, counted); the recorder waits (bounded).
+None of them drops while the agent keeps up; the diagnostics and the final report say if
+one did.
+
+Published per processed scan: ``place`` (``loci.place/1``), ``tf`` (odom → laser),
+``scan/full`` (the 360° scan); when they change: ``graph``, ``graph/scene``, ``areas``,
+``areas/scene``; every period: ``diagnostics``. A malformed message on a subscribed stream
+is logged, counted (``invalid``) and ignored.
+
+Shutdown (``stop`` set): the laser stops (the LMS is put back to 9600 baud and its port
+closed); scans still waiting get up to ``odometry.max_wait`` for their odometry; the state
+is saved; a last diagnostics message marks the end (``extra.final``: the scans fed and the
+last scan's stamp, which a replay uses to stop at the same scan); the recording is flushed
+and closed; every subscription, queryable and the session are closed.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import hashlib
+import json
+import logging
+import math
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TypeVar
+
+import zenoh
+
+from agent.bus.bridge import BusClosed, BusStats, Publisher, RawSample, Subscription, publish_stream
+from agent.bus.codecs import (
+    LASER_SCAN_CODEC,
+    POSE_CODEC,
+    Codec,
+    decode_laser_scan,
+    frame_transform,
+    split_encoding,
+)
+from agent.bus.diagnostics import diagnostics_message, publish_diagnostics
+from agent.bus.keys import Policy, RobotKeys, robot_wildcard
+from agent.bus.queryable import StateCell, StateQueryable
+from agent.bus.scene import areas_scene, graph_scene
+from agent.bus.session import close_session, listening_endpoints, open_session
+from agent.config import AgentConfig
+from agent.odom_sync import Matched, OdomSync
+from agent.pipeline import Pipeline, PipelineParams, StepResult, place_message
+from agent.recording.recorder import McapSink, Recorder, recording_metadata
+from drivers.messages import LaserScan, Pose2D
+from knowledge.errors import ConfigError, DataError, ProtocolError
+from knowledge.fileio import atomic_write_text
+from knowledge.navigation import persistence
+from knowledge.places.model import PlaceModel
+
+log = logging.getLogger(__name__)
+T = TypeVar("T")
+
+#: Samples a sensor subscription keeps for a busy loop (drop-oldest beyond, counted).
+SENSOR_QUEUE = 256
+#: Seconds between housekeeping rounds (expiry of waiting scans, debounced saving).
+TICK = 0.05
+#: Seconds the recorder gets to receive the agent's last publications before it stops.
+RECORD_GRACE = 0.3
+
+
+def checked_decode(codec: Codec[T], encoding: str, payload: bytes, where: str) -> T:
+    """Decode a sample as a subscriber does: a sample whose encoding names another schema
+    is invalid (:class:`ProtocolError`); one without a schema is decoded anyway."""
+    _, schema = split_encoding(encoding)
+    if schema and schema != codec.schema:
+        raise ProtocolError(f"{where}: expected {codec.schema}, the sample says {schema}")
+    return codec.decode(payload)
+
+
+def _timed(codec: Codec[T]) -> Callable[[RawSample], tuple[float, T]]:
+    """A subscription decoder keeping the arrival time (seconds since the epoch)."""
+
+    def decode(raw: RawSample) -> tuple[float, T]:
+        return raw.recv_ns * 1e-9, checked_decode(codec, raw.encoding, raw.payload, raw.key)
+
+    return decode
+
+
+def file_sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with path.open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def full_scan_message(result: StepResult, max_range: float) -> LaserScan:
+    """The 360° scan of a step as a :class:`LaserScan` in the laser's frame (``max_range``:
+    the model's, which beams that hit nothing carry)."""
+    n = int(result.ranges.shape[0])
+    scan = result.scan
+    return LaserScan(
+        stamp=scan.stamp,
+        seq=scan.seq,
+        frame_id=scan.frame_id,
+        angle_min=0.0,
+        angle_increment=2.0 * math.pi / n,
+        range_max=float(max_range),
+        ranges=result.ranges,
+    )
+
+
+def _percentiles(values: deque[float]) -> dict[str, float]:
+    if not values:
+        return {}
+    s = sorted(values)
+    return {"p50": round(s[len(s) // 2], 3), "p99": round(s[min(len(s) - 1, int(0.99 * len(s)))], 3)}
+
+
+@dataclass
+class AgentReport:
+    """What a run did (returned by :meth:`Agent.run`, printed by ``loci run`` at exit).
+
+    ``drops`` holds the scans (or samples) lost for lack of capacity or time: ``driver``
+    (the LMS driver's queue), ``scan_queue``, ``odom_queue`` (bus subscriptions),
+    ``no_odometry``, ``odom_gap``, ``overflow`` (:class:`~agent.odom_sync.OdomSync`); scans
+    dropped for deterministic reasons (``before_odometry``, ``out_of_order``, ``unfinished``)
+    are in ``sync``.
+    """
+
+    robot: str
+    scans_fed: int = 0
+    scans_processed: int = 0
+    errors: int = 0
+    drops: dict[str, int] = field(default_factory=dict)
+    sync: dict[str, int] = field(default_factory=dict)
+    invalid: dict[str, int] = field(default_factory=dict)
+    nodes: int = 0
+    areas: int = 0
+    saves: int = 0
+    state_file: str | None = None
+    recording: str | None = None
+    recorded: int = 0
+
+    @property
+    def dropped(self) -> int:
+        return sum(self.drops.values())
+
+    def as_dict(self) -> dict[str, Any]:
+        return {k: v for k, v in self.__dict__.items()} | {"dropped": self.dropped}
+
+
+class Agent:
+    """The asyncio agent (see the module docstring).
+
+    Args:
+        config: the configuration.
+        model: a loaded place model (default: load ``config.places.model``).
+        on_ready: called once everything runs (the laser delivers or is subscribed).
+    """
+
+    def __init__(
+        self,
+        config: AgentConfig,
+        *,
+        model: PlaceModel | None = None,
+        on_ready: Callable[[Agent], None] | None = None,
+    ) -> None:
+        self.config = config
+        self.robot = config.robot_name
+        self.keys = RobotKeys(self.robot)
+        self.stats = BusStats()
+        self.params = PipelineParams.from_config(config)
+        self.sync = OdomSync(max_wait=config.odometry.max_wait, max_gap=config.odometry.max_gap)
+        self.report = AgentReport(self.robot)
+        self.endpoints: list[str] = []
+        self.session: zenoh.Session | None = None
+        self._model = model
+        self._on_ready = on_ready
+        self.pipeline: Pipeline | None = None
+        self._initial_state: dict[str, Any] | None = None
+        self._pubs: dict[str, Publisher[Any]] = {}
+        self._cells = {
+            "graph": StateCell("loci.graph/1"),
+            "areas": StateCell("loci.areas/1"),
+            "place": StateCell("loci.place/1"),
+        }
+        self._last_graph: dict[str, Any] | None = None
+        self._last_areas: dict[str, Any] | None = None
+        self._dirty = False
+        self._last_save = -math.inf
+        self._last_scan_stamp: float | None = None
+        self._process_ms: deque[float] = deque(maxlen=1000)
+        self._age_ms: deque[float] = deque(maxlen=1000)
+        self._lms: Any = None
+        self._odom_sub: Subscription[tuple[float, Pose2D]] | None = None
+        self._scan_sub: Subscription[tuple[float, LaserScan]] | None = None
+        self._warned_no_odom = -math.inf
+
+    # ------------------------------------------------------------------ setup
+    def _load(self) -> tuple[PlaceModel, Pipeline]:
+        cfg = self.config
+        if self._model is None and not cfg.places.model_path.is_file():
+            raise ConfigError(
+                f"places.model: {cfg.places.model_path} is not a file; give a place model (.npz) or 'default'"
+            )
+        model = self._model or PlaceModel.load(cfg.places.model_path)
+        state = cfg.state.path
+        if cfg.state.resume and state.exists():
+            try:
+                doc = json.loads(state.read_text(encoding="utf-8"))
+                pipeline = Pipeline.from_state(doc, model, self.params)
+            except (ValueError, ProtocolError) as exc:
+                raise DataError(
+                    f"{state}: {exc}. Move the file aside to start a new map, or set state.resume = false"
+                ) from exc
+            self._initial_state = persistence.to_document(pipeline.graph, pipeline.areas)
+            log.info(
+                "resumed the map of %s: %d nodes, %d areas",
+                state,
+                len(pipeline.graph),
+                len(pipeline.areas.areas),
+            )
+        else:
+            pipeline = Pipeline(model, self.params)
+        Pipeline.warm_up(model, self.params)
+        return model, pipeline
+
+    def _recording_path(self) -> Path | None:
+        path = self.config.record.path
+        return Path(time.strftime(path)) if path else None
+
+    def _metadata(self, model: PlaceModel) -> dict[str, str]:
+        cfg = self.config
+        model_path = cfg.places.model_path
+        return recording_metadata(
+            self.robot,
+            key=robot_wildcard(self.robot),
+            writer="loci run",
+            pipeline=json.dumps(self.params.to_table(), sort_keys=True),
+            model=str(model_path),
+            model_sha256=file_sha256(model_path) if model_path.is_file() else "",
+            initial_state=persistence.dumps(self._initial_state) if self._initial_state else "",
+            max_wait=cfg.odometry.max_wait,
+            max_gap=cfg.odometry.max_gap,
+            laser_source=cfg.laser.source,
+        )
+
+    def _declare(self, session: zenoh.Session) -> list[StateQueryable]:
+        for stream in (
+            "place",
+            "tf",
+            "scan/full",
+            "graph",
+            "graph/scene",
+            "areas",
+            "areas/scene",
+            "diagnostics",
+        ):
+            self._pubs[stream] = publish_stream(session, self.robot, stream, stats=self.stats)
+        if self.config.laser.source == "lms":
+            self._pubs["scan"] = publish_stream(session, self.robot, "scan", stats=self.stats)
+        return [StateQueryable(session, self.keys.state(name), cell) for name, cell in self._cells.items()]
+
+    def _subscribe(
+        self, session: zenoh.Session, stream: str, codec: Codec[T]
+    ) -> Subscription[tuple[float, T]]:
+        return Subscription(
+            session,
+            self.keys.stream(stream),
+            _timed(codec),
+            policy=Policy.DROP_OLDEST,
+            capacity=SENSOR_QUEUE,
+            stats=self.stats,
+            name=stream,
+        )
+
+    # ------------------------------------------------------------------ run
+    async def run(self, stop: asyncio.Event | None = None) -> AgentReport:
+        """Run until ``stop`` is set; returns the report. Raises what made a task fail
+        (after the same orderly shutdown)."""
+        stop = stop or asyncio.Event()
+        cfg = self.config
+        model, pipeline = await asyncio.to_thread(self._load)
+        self.pipeline = pipeline
+        record_path = self._recording_path()
+        sink: McapSink | None = None
+        recorder: Recorder | None = None
+        tasks: dict[str, asyncio.Task[Any]] = {}
+        queryables: list[StateQueryable] = []
+        failure: BaseException | None = None
+        session = self.session = open_session(cfg.bus)
+        try:
+            self.endpoints = listening_endpoints(session) if cfg.bus.picks_free_port else list(cfg.bus.listen)
+            if record_path is not None:
+                sink = McapSink(record_path, overwrite=cfg.record.overwrite, metadata=self._metadata(model))
+                recorder = Recorder(
+                    session,
+                    sink,
+                    robot_wildcard(self.robot),
+                    flush_interval=cfg.record.flush_interval,
+                    stats=self.stats,
+                )
+                tasks["recorder"] = asyncio.create_task(recorder.run(), name="recorder")
+                self.report.recording = str(record_path)
+            queryables = self._declare(session)
+            self._publish_state(pipeline.last_stamp or time.time(), force=True)
+            self._odom_sub = self._subscribe(session, "odom", POSE_CODEC)
+            tasks["odometry"] = asyncio.create_task(self._odometry_task(), name="odometry")
+            if cfg.laser.source == "lms":
+                if not await self._start_lms(stop):
+                    return self.report
+                tasks["laser"] = asyncio.create_task(self._lms_task(), name="laser")
+            else:
+                self._scan_sub = self._subscribe(session, "scan", LASER_SCAN_CODEC)
+                tasks["laser"] = asyncio.create_task(self._scan_bus_task(), name="laser")
+            tasks["housekeeping"] = asyncio.create_task(self._housekeeping_task(), name="housekeeping")
+            tasks["diagnostics"] = asyncio.create_task(
+                publish_diagnostics(
+                    self._pubs["diagnostics"],
+                    self.stats,
+                    self.robot,
+                    period=cfg.diagnostics.period,
+                    extra=self._extra,
+                ),
+                name="diagnostics",
+            )
+            if self._on_ready is not None:
+                self._on_ready(self)
+            stopper = asyncio.create_task(stop.wait(), name="stop")
+            done, _ = await asyncio.wait({stopper, *tasks.values()}, return_when=asyncio.FIRST_COMPLETED)
+            stopper.cancel()
+            for t in done:
+                if t is not stopper and not t.cancelled() and t.exception() is not None:
+                    failure = t.exception()
+                    log.error("the %s task failed: %s", t.get_name(), failure)
+        finally:
+            await self._shutdown(tasks, recorder, sink, queryables, session)
+        if failure is not None:
+            raise failure
+        return self.report
+
+    async def _start_lms(self, stop: asyncio.Event) -> bool:
+        from drivers.sick.driver import LMS2xx
+
+        lc = self.config.laser
+        angle, resolution = lc.angle_resolution
+        assert lc.port is not None
+        self._lms = LMS2xx(
+            lc.port,
+            baud=lc.baud,
+            angle=angle,
+            resolution=resolution,
+            frame_id=lc.frame_id,
+            queue_size=lc.queue_size,
+            timeout=lc.timeout,
+        )
+        start = asyncio.create_task(self._lms.start(), name="laser start")
+        stopper = asyncio.create_task(stop.wait())
+        await asyncio.wait({start, stopper}, return_when=asyncio.FIRST_COMPLETED)
+        stopper.cancel()
+        if not start.done():
+            start.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await start
+            return False
+        start.result()  # raises DeviceError/DeviceTimeout: nothing to run without the laser
+        log.info("laser on %s: %s", lc.port, self._lms.info)
+        return True
+
+    # ------------------------------------------------------------------ tasks
+    def _drain_odometry(self) -> None:
+        sub = self._odom_sub
+        if sub is None:
+            return
+        while (item := sub.try_recv()) is not None:
+            self._feed(self.sync.add_odom(item[1], item[0]))
+
+    def _feed_scan(self, scan: LaserScan, now: float) -> None:
+        self._drain_odometry()
+        self.report.scans_fed += 1
+        self._last_scan_stamp = scan.stamp
+        self._feed(self.sync.add_scan(scan, now))
+
+    async def _odometry_task(self) -> None:
+        assert self._odom_sub is not None
+        with contextlib.suppress(BusClosed):
+            while True:
+                for recv, pose in await self._odom_sub.recv_batch(SENSOR_QUEUE):
+                    self._feed(self.sync.add_odom(pose, recv))
+
+    async def _lms_task(self) -> None:
+        pub = self._pubs["scan"]
+        async for scan in self._lms:
+            now = time.time()
+            data = LASER_SCAN_CODEC.encode(scan)
+            pub.put_bytes(data)
+            # the bytes just published, decoded: the pipeline sees exactly what is recorded
+            self._feed_scan(decode_laser_scan(data), now)
+
+    async def _scan_bus_task(self) -> None:
+        assert self._scan_sub is not None
+        with contextlib.suppress(BusClosed):
+            while True:
+                for recv, scan in await self._scan_sub.recv_batch(SENSOR_QUEUE):
+                    self._feed_scan(scan, recv)
+
+    async def _housekeeping_task(self) -> None:
+        interval = self.config.state.save_interval
+        while True:
+            await asyncio.sleep(TICK)
+            self._drain_odometry()
+            before = self.sync.stats.no_odometry
+            self.sync.expire(time.time())
+            if self.sync.stats.no_odometry > before and time.monotonic() - self._warned_no_odom > 10.0:
+                self._warned_no_odom = time.monotonic()
+                log.warning(
+                    "scans are waiting in vain for odometry on %s (%d dropped so far); is the base running?",
+                    self.keys.odom,
+                    self.sync.stats.no_odometry,
+                )
+            if self._dirty and time.monotonic() - self._last_save >= interval:
+                await self._save()
+
+    # ------------------------------------------------------------------ per scan
+    def _feed(self, matched: list[Matched]) -> None:
+        pipeline = self.pipeline
+        assert pipeline is not None
+        for m in matched:
+            t0 = time.perf_counter()
+            try:
+                result = pipeline.process(m.scan, m.pose)
+                self._publish(result)
+            except Exception:
+                self.report.errors += 1
+                n = self.report.errors
+                if n <= 5 or n % 100 == 0:  # a bug or a strange scan: say so, but do not flood the log
+                    log.exception(
+                        "processing scan %d (stamp %.3f) failed (%d so far); it is skipped",
+                        m.scan.seq,
+                        m.scan.stamp,
+                        n,
+                    )
+                continue
+            self._process_ms.append((time.perf_counter() - t0) * 1e3)
+            self._age_ms.append((time.time() - result.stamp) * 1e3)
+
+    def _publish(self, result: StepResult) -> None:
+        self._cells["place"].set(place_message(result))
+        place = self._cells["place"]()
+        assert place is not None
+        self._pubs["place"].put_bytes(place)
+        self._pubs["tf"].put(frame_transform(result.pose, result.scan.frame_id))
+        assert self.pipeline is not None
+        self._pubs["scan/full"].put(full_scan_message(result, self.pipeline.params.rear_beams.max_range))
+        if result.graph_changed or result.areas_changed:
+            self._publish_state(result.stamp)
+        if result.state_changed:
+            self._dirty = True
+        for event in result.events:
+            log.info("areas: %s", event)
+
+    def _publish_state(self, stamp: float, *, force: bool = False) -> None:
+        """Publish the graph and areas (messages and scenes) if they changed since the last time."""
+        pipeline = self.pipeline
+        assert pipeline is not None
+        graph, areas = pipeline.messages(stamp)
+        if force or self._last_graph is None or _body(graph) != _body(self._last_graph):
+            self._last_graph = graph
+            self._cells["graph"].set(graph)
+            data = self._cells["graph"]()
+            assert data is not None
+            self._pubs["graph"].put_bytes(data)
+            self._pubs["graph/scene"].put(graph_scene(graph))
+        if force or self._last_areas is None or _body(areas) != _body(self._last_areas):
+            self._last_areas = areas
+            self._cells["areas"].set(areas)
+            data = self._cells["areas"]()
+            assert data is not None
+            self._pubs["areas"].put_bytes(data)
+            self._pubs["areas/scene"].put(areas_scene(areas, graph))
+
+    async def _save(self) -> None:
+        pipeline = self.pipeline
+        assert pipeline is not None
+        text = persistence.dumps(pipeline.state_document(meta={"robot": self.robot})) + "\n"
+        self._dirty = False
+        self._last_save = time.monotonic()
+        try:
+            await asyncio.to_thread(atomic_write_text, self.config.state.path, text)
+        except OSError as exc:
+            self._dirty = True
+            log.error("saving the map to %s failed: %s", self.config.state.path, exc)
+            return
+        self.report.saves += 1
+
+    def _extra(self) -> dict[str, Any]:
+        pipeline = self.pipeline
+        out: dict[str, Any] = {
+            "scans": {"fed": self.report.scans_fed, "processed": pipeline.scans if pipeline else 0},
+            "sync": self.sync.stats.as_dict(),
+            "latency_ms": {"process": _percentiles(self._process_ms), "age": _percentiles(self._age_ms)},
+            "errors": self.report.errors,
+            "saves": self.report.saves,
+        }
+        if pipeline is not None:
+            out["graph"] = {"nodes": len(pipeline.graph), "areas": len(pipeline.areas.areas)}
+        if self._lms is not None:
+            out["laser"] = self._lms.stats.as_dict()
+        return out
+
+    # ------------------------------------------------------------------ shutdown
+    async def _shutdown(
+        self,
+        tasks: dict[str, asyncio.Task[Any]],
+        recorder: Recorder | None,
+        sink: McapSink | None,
+        queryables: list[StateQueryable],
+        session: zenoh.Session,
+    ) -> None:
+        try:
+            await self._stop_laser(tasks)
+            # scans still waiting get their odometry (or time out) before anything else stops
+            deadline = time.monotonic() + self.config.odometry.max_wait + 2 * TICK
+            odometry = tasks.get("odometry")
+            while (
+                self.sync.pending
+                and time.monotonic() < deadline
+                and odometry is not None
+                and not odometry.done()
+            ):
+                await asyncio.sleep(TICK / 2)
+                self._drain_odometry()
+                self.sync.expire(time.time())
+            for name in ("housekeeping", "diagnostics", "odometry"):
+                await _cancel(tasks.get(name))
+            if self._odom_sub is not None:
+                self._odom_sub.close()
+            self.sync.close()
+            if self.pipeline is not None and (self._dirty or self.pipeline.scans):
+                await self._save()
+            self._fill_report()
+            with contextlib.suppress(Exception):
+                if "diagnostics" in self._pubs:
+                    final = {"scans_fed": self.report.scans_fed, "last_scan_stamp": self._last_scan_stamp}
+                    self._pubs["diagnostics"].put(
+                        diagnostics_message(self.stats, self.robot, extra={**self._extra(), "final": final})
+                    )
+            if recorder is not None:
+                await asyncio.sleep(RECORD_GRACE)
+                recorder.stop()
+                await _cancel(tasks.get("recorder"), wait_only=True)
+        finally:
+            if sink is not None:
+                sink.close()
+                self.report.recorded = sink.messages
+            for q in queryables:
+                q.close()
+            for pub in self._pubs.values():
+                pub.close()
+            close_session(session)
+            self.session = None
+
+    async def _stop_laser(self, tasks: dict[str, asyncio.Task[Any]]) -> None:
+        await _cancel(tasks.get("laser"))
+        if self._scan_sub is not None:
+            self._scan_sub.close()
+        if self._lms is not None:
+            try:
+                await asyncio.wait_for(self._lms.close(), 5.0)
+            except Exception as exc:  # the port may be gone; the agent stops anyway
+                log.warning("stopping the laser on %s: %s", self.config.laser.port, exc)
+
+    def _fill_report(self) -> None:
+        r = self.report
+        snap = self.stats.snapshot()
+        s = self.sync.stats
+        r.scans_processed = self.pipeline.scans if self.pipeline else 0
+        r.drops = {
+            "driver": self._lms.stats.dropped if self._lms is not None else 0,
+            "scan_queue": snap.get("scan", {}).get("dropped", 0) if self._scan_sub is not None else 0,
+            "odom_queue": snap.get("odom", {}).get("dropped", 0),
+            "no_odometry": s.no_odometry,
+            "odom_gap": s.odom_gap,
+            "overflow": s.overflow,
+        }
+        r.sync = s.as_dict()
+        r.invalid = {k: v["invalid"] for k, v in snap.items() if v.get("invalid")}
+        if self.pipeline is not None:
+            r.nodes = len(self.pipeline.graph)
+            r.areas = len(self.pipeline.areas.areas)
+        r.state_file = str(self.config.state.path)
+
+
+def _body(message: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in message.items() if k != "stamp"}
+
+
+async def _cancel(task: asyncio.Task[Any] | None, *, wait_only: bool = False) -> None:
+    if task is None:
+        return
+    if not wait_only:
+        task.cancel()
+    with contextlib.suppress(asyncio.CancelledError, Exception):
+        await task

@@ -1,0 +1,217 @@
+"""``loci replay`` on MCAP files written here with the recorder's sink.
+
+A recording holds a scripted drive along a generated office's corridor: 360° scans ray cast
+at 10 Hz and odometry at 50 Hz whose samples include each scan's stamp, so the pose each
+scan must get is known without any interpolation. The expected map is the pipeline fed
+those (scan, pose) pairs directly.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agent.bus.bridge import RawSample
+from agent.bus.codecs import LASER_SCAN_CODEC, POSE_CODEC
+from agent.commands.replay import read_recording_metadata, replay_recording
+from agent.pipeline import Pipeline, PipelineParams, areas_message, graph_message
+from agent.recording.recorder import McapSink, recording_metadata
+from agent.recording.replay import McapMessages
+from drivers.messages import LaserScan, Pose2D
+from knowledge.metric.buildings import generate_building
+from knowledge.metric.raycast import cast
+from knowledge.navigation import persistence
+from knowledge.navigation.graph import GraphParams
+from knowledge.places.model import PlaceModel, default_model_path
+
+REPO = Path(__file__).resolve().parent.parent
+ROBOT = "rosie"
+T0 = 1.75e9
+
+
+@dataclass
+class Run:
+    scans: list[LaserScan]
+    poses: list[Pose2D]  # odometry, 50 Hz
+    scan_poses: list[Pose2D]  # the odometry sample at each scan's stamp
+
+
+@pytest.fixture(scope="module")
+def model() -> PlaceModel:
+    return PlaceModel.load(default_model_path())
+
+
+@pytest.fixture(scope="module")
+def run() -> Run:
+    b = generate_building(3, furniture=False, layout="straight")
+    x0, y0, _, y1 = b.corridors[0].rects[0]
+    y = (y0 + y1) / 2
+    stamps = T0 + 0.02 * np.arange(500)  # 10 s at 50 Hz, 0.6 m/s
+    xs = x0 + 1.0 + 0.6 * (stamps - T0)
+    poses = [Pose2D(float(x), y, 0.0, stamp=float(t)) for x, t in zip(xs, stamps, strict=True)]
+    scan_poses = poses[::5]
+    rng = np.random.default_rng(3)
+    arr = np.array([p.as_array() for p in scan_poses])
+    raw = cast(b.grid, arr, n_beams=360, max_range=30.0, noise_std=0.01, rng=rng)
+    scans = [
+        LaserScan(p.stamp, i, "laser", 0.0, 2 * math.pi / 360, 30.0, raw[i]) for i, p in enumerate(scan_poses)
+    ]
+    return Run(scans, poses, scan_poses)
+
+
+def write_recording(
+    path: Path,
+    run: Run,
+    *,
+    metadata: dict[str, str] | None = None,
+    garbage: bool = False,
+    until: float = math.inf,
+) -> None:
+    """The run as the recorder writes it: odometry arrives 3 ms after its stamp, scans 8 ms."""
+    events: list[tuple[int, str, bytes, str]] = []
+    for p in run.poses:
+        events.append((int((p.stamp + 0.003) * 1e9), "odom", POSE_CODEC.encode(p), POSE_CODEC.zenoh_encoding))
+    for s in run.scans:
+        enc = LASER_SCAN_CODEC.encode(s)
+        events.append((int((s.stamp + 0.008) * 1e9), "scan", enc, LASER_SCAN_CODEC.zenoh_encoding))
+    if garbage:
+        events.append((int((T0 + 1.0011) * 1e9), "odom", b"\xff\x00garbage", POSE_CODEC.zenoh_encoding))
+    events.sort()
+    with McapSink(path, metadata=metadata, chunk_size=16 * 1024) as sink:
+        for t, stream, data, encoding in events:
+            if t * 1e-9 <= until:
+                sink.write(RawSample(f"loci/{ROBOT}/{stream}", data, encoding, t))
+
+
+def expected(
+    model: PlaceModel, run: Run, params: PipelineParams | None = None, n: int | None = None
+) -> Pipeline:
+    p = Pipeline(model, params)
+    for scan, pose in list(zip(run.scans, run.scan_poses, strict=True))[:n]:
+        p.process(scan, pose)
+    return p
+
+
+def loci(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "agent.cli", *args],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+
+
+def test_loci_replay_rebuilds_the_map_and_writes_it(tmp_path: Path, run: Run, model: PlaceModel) -> None:
+    rec = tmp_path / "run.mcap"
+    write_recording(rec, run, garbage=True)  # as `loci record` writes it: no agent metadata
+    want = expected(model, run)
+    assert len(want.graph) >= 4
+    doc = want.state_document()
+    out = loci("replay", str(rec), "--out-dir", str(tmp_path / "out"))
+    assert out.returncode == 0, out.stderr
+    assert f"{len(run.scans)} scans, {len(run.poses)} odometry samples (1 invalid)" in out.stdout, out.stdout
+    assert f"{len(run.scans)} scans processed, 0 dropped" in out.stdout, out.stdout
+    graph = json.loads((tmp_path / "out" / "graph.json").read_text())
+    areas = json.loads((tmp_path / "out" / "areas.json").read_text())
+    assert graph == graph_message(doc, run.scans[-1].stamp)
+    assert areas == areas_message(doc, run.scans[-1].stamp)
+    g, a = persistence.load(tmp_path / "out" / "navgraph.json")
+    assert sorted(g.nodes) == sorted(want.graph.nodes) and a is not None
+    assert {k: n.label for k, n in g.nodes.items()} == {k: n.label for k, n in want.graph.nodes.items()}
+
+
+def test_a_truncated_recording_replays_up_to_its_last_complete_message(
+    tmp_path: Path, run: Run, model: PlaceModel
+) -> None:
+    rec = tmp_path / "run.mcap"
+    write_recording(rec, run)
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(rec.read_bytes()[: int(rec.stat().st_size * 0.6)])  # a crashed writer's file
+    kept = McapMessages(cut)
+    scans = [m for m in kept if m.topic.endswith("/scan")]
+    assert kept.truncated and 0 < len(scans) < len(run.scans)
+    out = loci("replay", str(cut), "--json")
+    assert out.returncode == 0, out.stderr
+    assert "ends without its footer" in out.stderr
+    got = json.loads(out.stdout)
+    assert got["truncated"]
+    # the scans whose odometry made it into the file are processed; the others wait in vain
+    last_odom = max(POSE_CODEC.decode(m.data).stamp for m in kept.__class__(cut) if m.topic.endswith("/odom"))
+    n = sum(LASER_SCAN_CODEC.decode(m.data).stamp <= last_odom for m in scans)
+    assert got["stats"]["processed"] == n
+    want = expected(model, run, n=n)
+    assert got["graph"]["nodes"] == graph_message(want.state_document(), 0.0)["nodes"]
+
+
+def test_recorded_parameters_initial_map_and_live_end_are_used(
+    tmp_path: Path, run: Run, model: PlaceModel
+) -> None:
+    half = len(run.scans) // 2
+    params = PipelineParams(graph=GraphParams(node_distance=1.6, window=5))
+    first = expected(model, run, params, n=half)
+    initial = persistence.dumps(first.state_document())
+    rec = tmp_path / "resumed.mcap"
+    meta = recording_metadata(
+        ROBOT,
+        pipeline=json.dumps(params.to_table()),
+        model=str(default_model_path()),
+        initial_state=initial,
+        max_wait=0.2,
+        max_gap=0.5,
+    )
+    later = Run(
+        run.scans[half:], [p for p in run.poses if p.stamp >= run.scans[half].stamp], run.scan_poses[half:]
+    )
+    write_recording(rec, later, metadata=meta)
+    assert read_recording_metadata(rec)["initial_state"] == initial
+    res = replay_recording(rec, model=model)
+    want = Pipeline.from_state(json.loads(initial), model, params)
+    for scan, pose in zip(later.scans, later.scan_poses, strict=True):
+        want.process(scan, pose)
+    assert res.resumed and res.pipeline.params.graph.node_distance == 1.6
+    got, exp = res.pipeline.state_document(), want.state_document()
+    assert got["nodes"] == exp["nodes"] and got["areas"] == exp["areas"]
+    assert min(set(res.pipeline.graph.nodes) - set(first.graph.nodes)) >= first.graph.next_id
+    fresh = replay_recording(rec, model=model, fresh=True)
+    assert not fresh.resumed and min(fresh.pipeline.graph.nodes) == 1
+
+
+def test_realtime_replay_keeps_the_recorded_pace(tmp_path: Path, run: Run, model: PlaceModel) -> None:
+    rec = tmp_path / "short.mcap"
+    write_recording(rec, run, until=T0 + 1.0)
+    t = time.monotonic()
+    fast = replay_recording(rec, model=model)
+    fast_s = time.monotonic() - t
+    t = time.monotonic()
+    paced = replay_recording(rec, model=model, speed=1.0)
+    paced_s = time.monotonic() - t
+    assert paced.pipeline.scans == fast.pipeline.scans > 0
+    assert paced_s >= 0.9 and paced_s > fast_s
+
+
+def test_errors_say_what_is_wrong(tmp_path: Path) -> None:
+    out = loci("replay", str(tmp_path / "absent.mcap"))
+    assert out.returncode == 2 and "no such recording" in out.stderr
+    empty = tmp_path / "empty.mcap"
+    with McapSink(empty) as sink:
+        sink.write(
+            RawSample(
+                "loci/rosie/odom", POSE_CODEC.encode(Pose2D(0, 0, 0, stamp=T0)), POSE_CODEC.zenoh_encoding, 1
+            )
+        )
+    with pytest.raises(Exception, match="no loci/rosie/scan messages"):
+        replay_recording(empty, robot="rosie")
+    not_mcap = tmp_path / "text.mcap"
+    not_mcap.write_text("hello")
+    out = loci("replay", str(not_mcap))
+    assert out.returncode == 2 and "not an MCAP file" in out.stderr

@@ -118,7 +118,7 @@ def test_evaluate_ignores_classes_the_model_lacks_consistently(
             "--stride",
             "8",
             "--json",
-        ).stdout  # fmt: skip
+        ).stdout
     )
     if "hallway" not in result["ignored"]:
         pytest.skip("this generated building has no hall")

@@ -14,9 +14,13 @@ The base does what every such device needs and a backend should not rewrite:
   reply) — the python-can ``send``/``_send_internal`` split.
 * the connection: open by name/URL, change the baud rate, notice a lost line (read errors,
   end of file, the device node gone, or silence while data is expected), re-open by name
-  with exponential back-off and re-run :meth:`_initialise`, count it.
-* a clean :meth:`close`: the backend's :meth:`_shutdown` first (best effort), then the port;
-  no task is left running.
+  with exponential back-off and re-run :meth:`_initialise`, count it. A reply the backend
+  cannot decode (:class:`~knowledge.errors.ProtocolError`) during initialisation is a device
+  problem like silence: :meth:`start` raises it as :class:`~knowledge.errors.DeviceError`,
+  a reconnection retries with back-off. Nothing a reconnection meets stops the background
+  task (an unexpected error is logged with its traceback and retried too).
+* a clean :meth:`close`: the backend's :meth:`_shutdown` first (best effort, any error is
+  logged), then the port, always; no task is left running.
 """
 
 from __future__ import annotations
@@ -29,7 +33,7 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
-from knowledge.errors import DeviceError, DeviceTimeout
+from knowledge.errors import DeviceError, DeviceTimeout, ProtocolError
 
 log = logging.getLogger(__name__)
 
@@ -128,6 +132,8 @@ class SerialDevice(ABC, Generic[Req, Rep]):
         self._n_disconnects = 0
         self._n_timeouts = 0
         self._n_refused = 0
+        self._n_bad_replies = 0
+        self._n_failed_reconnects = 0
         self._last_error: str | None = None
         self._dying: list[_LineProtocol] = []
 
@@ -145,7 +151,11 @@ class SerialDevice(ABC, Generic[Req, Rep]):
 
     @abstractmethod
     async def _initialise(self) -> None:
-        """Bring the device up on the freshly opened line (runs again after each reconnect)."""
+        """Bring the device up on the freshly opened line (runs again after each reconnect).
+
+        Raise DeviceError/DeviceTimeout when the device misbehaves or is silent; a
+        ProtocolError from decoding a reply is treated the same way.
+        """
 
     async def _shutdown(self) -> None:
         """Put the device to rest before the port closes (best effort; errors are logged)."""
@@ -172,7 +182,8 @@ class SerialDevice(ABC, Generic[Req, Rep]):
         """Open the port and initialise the device; then keep it connected in the background.
 
         Raises:
-            DeviceError: the port cannot be opened or the device misbehaves.
+            DeviceError: the port cannot be opened or the device misbehaves (including a
+                reply that cannot be decoded).
             DeviceTimeout: the device does not answer.
         """
         if self._supervisor is not None:
@@ -188,23 +199,35 @@ class SerialDevice(ABC, Generic[Req, Rep]):
         )
 
     async def close(self) -> None:
-        """Shut the device down (best effort), close the port and stop the background task."""
+        """Shut the device down (best effort), close the port and stop the background task.
+
+        The port is closed whatever happens on the way; errors of the shutdown or of a
+        background task that died are logged, not raised.
+        """
         self._closing = True
-        if self._supervisor is not None:
-            self._supervisor.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._supervisor
-            self._supervisor = None
-        if self._link is not None:
-            try:
-                await self._shutdown()
-            except (DeviceError, DeviceTimeout, OSError) as exc:
-                log.warning("%s: shutdown incomplete: %s", self.port, exc)
-        await self._close_link()
-        for protocol in self._dying:
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(protocol.closed.wait(), 2.0)
-        self._dying.clear()
+        try:
+            await self._stop_supervisor()
+            if self._link is not None:
+                try:
+                    await self._shutdown()
+                except Exception as exc:  # best effort: the port must close regardless
+                    log.warning("%s: shutdown incomplete: %s", self.port, exc)
+        finally:
+            await self._close_link()
+            for protocol in self._dying:
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(protocol.closed.wait(), 2.0)
+            self._dying.clear()
+
+    async def _stop_supervisor(self) -> None:
+        task, self._supervisor = self._supervisor, None
+        if task is None:
+            return
+        task.cancel()
+        await asyncio.wait([task])  # never raises the task's own exception
+        if not task.cancelled() and task.exception() is not None:
+            exc = task.exception()
+            log.error("%s: the reconnection task had stopped: %r", self.port, exc, exc_info=exc)
 
     async def request(
         self, request: Req, *, what: str, timeout: float | None = None, retries: int | None = None
@@ -342,7 +365,14 @@ class SerialDevice(ABC, Generic[Req, Rep]):
 
     async def _connect(self) -> None:
         await self._open_link(self.initial_baudrate)
-        await self._initialise()
+        try:
+            await self._initialise()
+        except ProtocolError as exc:
+            self._n_bad_replies += 1
+            raise DeviceError(
+                self._describe(f"the device sent a reply that cannot be decoded ({exc})")
+                + "; is it the right device, and is the line clean?"
+            ) from exc
 
     async def _supervise(self) -> None:
         """Watch the line; when it is lost, re-open by name with back-off and re-initialise."""
@@ -355,11 +385,15 @@ class SerialDevice(ABC, Generic[Req, Rep]):
                 await asyncio.sleep(delay)
                 try:
                     await self._connect()
-                except (DeviceError, DeviceTimeout) as exc:
+                except Exception as exc:
+                    self._n_failed_reconnects += 1
                     self._last_error = str(exc)
-                    log.info("%s: reconnecting failed (%s); next try in %.1f s", self.port, exc, delay)
-                    await self._close_link()
                     delay = min(2 * delay, self.max_reconnect_delay)
+                    if isinstance(exc, DeviceError | DeviceTimeout | OSError):
+                        log.info("%s: reconnecting failed (%s); next try in %.1f s", self.port, exc, delay)
+                    else:  # a bug, not the device: loud, but the driver keeps trying
+                        log.exception("%s: reconnecting failed; next try in %.1f s", self.port, delay)
+                    await self._close_link()
                     continue
                 self._n_reconnects += 1
                 log.warning("%s: reconnected (%d reconnects so far)", self.port, self._n_reconnects)

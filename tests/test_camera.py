@@ -140,6 +140,34 @@ def test_missing_file_and_device_give_clear_errors(tmp_path: Path) -> None:
     assert not [t for t in threading.enumerate() if t.name.startswith("camera ")]
 
 
+class _CrashingBackend(CameraSource):
+    """A backend whose open crashes inside OpenCV (an empty image handed to ``cv2.resize``)."""
+
+    def _open(self) -> None:
+        cv2.resize(np.zeros((0, 0, 3), np.uint8), (W, H))
+
+    def _read(self) -> np.ndarray | None:
+        raise AssertionError("never opened, never read")
+
+    def _close(self) -> None:
+        pass
+
+
+def test_a_backend_crash_at_open_fails_start_at_once_with_its_cause() -> None:
+    async def main() -> None:
+        cam = _CrashingBackend("crasher", open_timeout=3.0)
+        with pytest.raises(DeviceError, match=r"camera crasher could not be opened: .*error") as err:
+            await cam.start()
+        assert not isinstance(err.value, DeviceTimeout)
+        assert isinstance(err.value.__cause__, cv2.error)
+        assert cam.ended
+        with pytest.raises(DeviceError, match="ended"):
+            await cam.recv(timeout=0.5)
+
+    _run(main())
+    assert not [t for t in threading.enumerate() if t.name == "camera crasher"]
+
+
 def test_recv_times_out(video: Path) -> None:
     async def main() -> None:
         async with OpenCVCamera(video, rate_hz=0.5) as cam:

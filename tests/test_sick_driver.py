@@ -8,23 +8,25 @@ inject faults or know the scene skip there.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import os
 import pty
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
 from drivers.messages import LaserScan
-from drivers.sick.constants import Mode
+from drivers.sick.constants import Mode, Reply
 from drivers.sick.driver import LMS2xx
 from drivers.sim.lms import Faults, VirtualLMS
 from drivers.sim.lms_world import LmsWorld
-from knowledge.errors import DeviceError, DeviceTimeout
+from knowledge.errors import DeviceError, DeviceTimeout, ProtocolError
 from knowledge.metric.grid import OccupancyGrid
 
 HW_PORT = os.environ.get("LOCI_LMS_PORT")
@@ -111,6 +113,32 @@ async def collect(lms: LMS2xx, seconds: float) -> list[LaserScan]:
         except DeviceTimeout:
             break
     return out
+
+
+async def fresh_scan(lms: LMS2xx, seconds: float) -> LaserScan:
+    """The first scan measured after now (older ones may still wait in the queue)."""
+    deadline = time.monotonic() + seconds
+    while True:
+        scan = await lms.recv(timeout=max(0.1, deadline - time.monotonic()))
+        if scan.stamp > time.time() - 0.1:
+            return scan
+
+
+async def until(cond: Callable[[], bool], seconds: float, what: str) -> None:
+    deadline = time.monotonic() + seconds
+    while not cond():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{what}: not within {seconds} s")
+        await asyncio.sleep(0.01)
+
+
+def fds_on(path: str | None) -> int:
+    """How many of this process's file descriptors are open on ``path`` (e.g. a /dev/pts/N)."""
+    n = 0
+    for fd in Path("/proc/self/fd").iterdir():
+        with contextlib.suppress(OSError):  # closed meanwhile
+            n += str(fd.readlink()) == path
+    return n
 
 
 @pytest.fixture
@@ -255,17 +283,122 @@ def test_unplug_and_replug_reconnects_and_scans_resume(rig: Rig, run: Any, power
             await asyncio.sleep(0.4)
             assert not sim.link.exists()
             sim.replug(power_cycle=power_cycle)
-            deadline = time.monotonic() + 5.0
-            while True:
-                scan = await lms.recv(timeout=max(0.1, deadline - time.monotonic()))
-                if scan.stamp > time.time() - 0.1:  # fresh, not left in the queue
-                    break
+            scan = await fresh_scan(lms, 5.0)
             assert scan.seq > before.seq
             assert lms.stats.reconnects == 1 and lms.stats.disconnects == 1
             assert sim.state().baud == 500000 and sim.state().streaming
             np.testing.assert_allclose(scan.ranges, expected_ranges(scan), atol=0.01)
 
     run(go())
+
+
+def test_a_malformed_reply_during_a_reconnect_is_retried_and_scans_resume(rig: Rig, run: Any) -> None:
+    sim = rig.need_sim()
+
+    async def go() -> None:
+        tasks = asyncio.all_tasks()
+        lms = rig.driver()
+        await lms.start()
+        try:
+            first = await lms.recv(timeout=2.0)
+            # the status reply (0xB1) comes back with a good CRC but too short to decode
+            sim.set_faults(Faults(short_replies=frozenset({Reply.STATUS})))
+            sim.unplug()
+            await asyncio.sleep(0.3)
+            sim.replug()
+            await until(lambda: sim.state().short_replies_sent >= 1, 5.0, "a short status reply sent")
+            sim.set_faults(Faults())
+            scan = await fresh_scan(lms, 5.0)
+            assert scan.seq > first.seq
+            np.testing.assert_allclose(scan.ranges, expected_ranges(scan), atol=0.01)
+            stats = lms.stats
+            assert stats.bad_replies >= 1 and stats.reconnect_failures >= 1
+            assert stats.reconnects == 1 and stats.disconnects == 1
+        finally:
+            await lms.close()  # must neither raise nor leave the port open
+        assert not lms.connected and asyncio.all_tasks() == tasks
+        assert fds_on(sim.pts) == 1  # only the virtual scanner's own end of the pty
+        await asyncio.sleep(0.1)
+        assert sim.state().baud == 9600 and not sim.state().streaming
+
+    run(go())
+
+
+def test_a_malformed_reply_at_start_is_a_device_error_and_frees_the_port(
+    make_sim: Callable[..., VirtualLMS], run: Any
+) -> None:
+    sim = make_sim(faults=Faults(short_replies=frozenset({Reply.STATUS})))
+
+    async def go() -> None:
+        lms = LMS2xx(str(sim.link), **FAST_SIM)  # type: ignore[arg-type]
+        with pytest.raises(DeviceError, match=r"cannot be decoded \(0xB1 reply too short") as err:
+            await lms.start()
+        assert isinstance(err.value.__cause__, ProtocolError)
+        assert lms.stats.bad_replies == 1 and not lms.connected
+        assert fds_on(sim.pts) == 1
+
+    run(go())
+
+
+def test_close_releases_the_port_when_the_goodbye_fails_to_decode(
+    make_sim: Callable[..., VirtualLMS], run: Any, caplog: pytest.LogCaptureFixture
+) -> None:
+    sim = make_sim()
+
+    class BadGoodbye(LMS2xx):
+        """Its shutdown meets a reply it cannot decode (the parser lets no short 0xA0 through)."""
+
+        async def _shutdown(self) -> None:
+            raise ProtocolError("0xA0 reply without its result byte")
+
+    async def go() -> None:
+        tasks = asyncio.all_tasks()
+        lms = BadGoodbye(str(sim.link), **FAST_SIM)  # type: ignore[arg-type]
+        await lms.start()
+        await lms.recv(timeout=2.0)
+        assert fds_on(sim.pts) == 2  # the host's end and the virtual scanner's
+        await lms.close()
+        assert not lms.connected and asyncio.all_tasks() == tasks
+        assert fds_on(sim.pts) == 1
+        with pytest.raises(DeviceError, match="closed"):
+            while True:
+                await lms.recv(timeout=0.5)
+
+    with caplog.at_level("WARNING", logger="drivers.serial_device"):
+        run(go())
+    assert "shutdown incomplete: 0xA0 reply without its result byte" in caplog.text
+
+
+def test_an_unexpected_error_while_reconnecting_does_not_stop_the_driver(
+    make_sim: Callable[..., VirtualLMS], run: Any, caplog: pytest.LogCaptureFixture
+) -> None:
+    sim = make_sim()
+
+    class Flaky(LMS2xx):
+        """Its second initialisation fails with an error no device problem would give."""
+
+        calls = 0
+
+        async def _initialise(self) -> None:
+            self.calls += 1
+            if self.calls == 2:
+                raise RuntimeError("a bug in a backend")
+            await super()._initialise()
+
+    async def go() -> None:
+        lms = Flaky(str(sim.link), **FAST_SIM)  # type: ignore[arg-type]
+        async with lms:
+            first = await lms.recv(timeout=2.0)
+            sim.unplug()
+            await asyncio.sleep(0.3)
+            sim.replug()
+            scan = await fresh_scan(lms, 5.0)
+            assert scan.seq > first.seq and lms.calls >= 3
+            assert lms.stats.reconnect_failures >= 1 and lms.stats.reconnects == 1
+
+    with caplog.at_level("ERROR", logger="drivers.serial_device"):
+        run(go())
+    assert "a bug in a backend" in caplog.text
 
 
 def test_garbage_and_flipped_bits_are_counted_and_never_reach_a_scan(rig: Rig, run: Any) -> None:

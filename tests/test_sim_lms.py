@@ -13,6 +13,7 @@ import time
 import tty
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -23,6 +24,7 @@ from drivers.sick.codec import Acknowledge, StreamParser, Telegram
 from drivers.sick.constants import ACK, NAK, Mode
 from drivers.sim.lms import Faults, VirtualLMS
 from drivers.sim.lms_world import (
+    LEG_RADIUS,
     Leg,
     LmsWorld,
     default_sensor_pose,
@@ -65,6 +67,31 @@ def test_a_leg_in_front_of_a_wall_shadows_it() -> None:
     assert r[0] == pytest.approx(2.0, abs=1e-4)  # to the right: the wall at y = 0.05
     assert r[180] == pytest.approx(2.0, abs=1e-4)  # to the left: the wall at y = 4.05
     assert r[45] == pytest.approx(2.0 / math.cos(math.pi / 4), abs=1e-4)
+
+
+@pytest.mark.parametrize("bearing_deg", [30.0, -60.0])
+@pytest.mark.parametrize(("n_beams", "fov_deg"), [(361, 180), (360, 360)])
+def test_a_leg_shows_in_the_beam_at_its_bearing(n_beams: int, fov_deg: int, bearing_deg: float) -> None:
+    grid = room()
+    pose = (3.05, 2.05, 0.4)  # the room's centre, walls 2 m and more away
+    d = 1.2
+    a = pose[2] + math.radians(bearing_deg)
+    leg = Leg((pose[0] + d * math.cos(a), pose[1] + d * math.sin(a)))
+    fov = math.radians(fov_deg)
+    walls = LmsWorld(grid, pose, noise_std=0.0).ranges(0.0, n_beams=n_beams, fov=fov, max_range=20.0)
+    r = LmsWorld(grid, pose, [leg], noise_std=0.0).ranges(0.0, n_beams=n_beams, fov=fov, max_range=20.0)
+    # a 180° scan runs from -90° to +90° inclusive; a full circle starts at 0° with no beam at 360°
+    if fov_deg == 360:
+        step, first = 2 * math.pi / n_beams, 0.0
+    else:
+        step, first = fov / (n_beams - 1), -fov / 2
+    i = round(((math.radians(bearing_deg) - first) % (2 * math.pi)) / step)
+    assert r[i] == pytest.approx(d - LEG_RADIUS, abs=1e-4)
+    shadowed = np.flatnonzero(r < walls - 1e-6)
+    off = np.abs(shadowed - i)
+    off = np.minimum(off, n_beams - off) if fov_deg == 360 else off
+    half_width = math.asin(LEG_RADIUS / d) / step  # beams on either side that graze the leg
+    assert shadowed.size >= 3 and np.all(off <= half_width + 1)
 
 
 def test_noise_only_on_hits_and_ranges_stay_in_bounds() -> None:
@@ -356,12 +383,14 @@ def sim_process(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[str], Path]]:
                 stream.close()
 
 
-def test_sim_and_sick_scan_commands_talk_over_the_pty(
-    sim_process: tuple[subprocess.Popen[str], Path],
-) -> None:
-    proc, link = sim_process
+#: Scans per second of the virtual LMS at 180°/0.5° (two mirror turns at 75 Hz per scan).
+LMS_RATE = 37.5
+
+
+def _sick_scan(link: Path, *args: str) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """Run ``loci sick scan LINK ARGS --json``: its summaries and its final counters."""
     out = subprocess.run(
-        _loci("-q", "sick", "scan", str(link), "--duration", "2", "--json"),
+        _loci("-q", "sick", "scan", str(link), *args, "--json"),
         cwd=REPO,
         capture_output=True,
         text=True,
@@ -369,15 +398,30 @@ def test_sim_and_sick_scan_commands_talk_over_the_pty(
     )
     assert out.returncode == 0, out.stderr
     lines = [json.loads(line) for line in out.stdout.splitlines()]
-    summaries = [x for x in lines if x["schema"] == "loci.sick.summary/1"]
-    final = lines[-1]
-    assert final["schema"] == "loci.sick.counters/1"
-    assert len(summaries) == 2
-    assert final["scans"] >= 30 and final["counters"]["crc_errors"] == 0
+    assert lines and lines[-1]["schema"] == "loci.sick.counters/1", out.stdout
+    return [x for x in lines if x["schema"] == "loci.sick.summary/1"], lines[-1]
+
+
+def _check_scanning(summaries: list[dict[str, Any]], final: dict[str, Any], duration: float) -> None:
+    """Every summary window saw room-sized scans, and the rate is the scanner's once it streams."""
+    assert final["duration"] >= duration
+    assert sum(s["scans"] for s in summaries) == final["scans"]
+    # a loaded machine may starve the virtual scanner for a while, never for a third of the time
+    assert LMS_RATE / 3 <= final["scans_per_s"] <= 1.2 * LMS_RATE
+    assert final["counters"]["crc_errors"] == 0
     assert final["info"]["baud"] == 500000 and final["info"]["n_beams"] == 361
     for s in summaries:
-        assert s["n_beams"] == 361 and s["invalid_per_scan"] == 0
+        assert s["scans"] >= 1 and s["n_beams"] == 361 and s["invalid_per_scan"] == 0
         assert 0.2 < s["min"] < s["mean"] < s["max"] < 7.3  # inside a 6 m x 4 m room
+
+
+def test_sim_and_sick_scan_commands_talk_over_the_pty(
+    sim_process: tuple[subprocess.Popen[str], Path],
+) -> None:
+    proc, link = sim_process
+    summaries, final = _sick_scan(link, "--duration", "2")
+    assert len(summaries) == 2
+    _check_scanning(summaries, final, 2.0)
 
     probe = subprocess.run(
         _loci("-q", "sick", "probe", str(link), "--json"),
@@ -393,6 +437,19 @@ def test_sim_and_sick_scan_commands_talk_over_the_pty(
     proc.send_signal(signal.SIGINT)
     assert proc.wait(10) == 0
     assert not link.exists()
+
+
+def test_sick_scan_counts_scanning_time_not_start_up(tmp_path: Path) -> None:
+    # left at 38400 baud by an earlier session: the driver waits in vain for an answer at
+    # 9600 and at 500000 baud (two 0.5 s attempts each), so starting takes longer than the
+    # whole --duration
+    world = LmsWorld(room(), (2.05, 1.55, 0.0), noise_std=0.0)
+    with VirtualLMS(world, link=tmp_path / "lms", initial_baud=38400) as sim:
+        summaries, final = _sick_scan(sim.link, "--duration", "1", "--interval", "0.5")
+    assert final["info"]["baud_found"] == 38400
+    assert final["startup"] > 2.0 and final["counters"]["timeouts"] >= 4
+    assert len(summaries) == 2
+    _check_scanning(summaries, final, 1.0)
 
 
 def test_sick_probe_reports_a_missing_port(tmp_path: Path) -> None:

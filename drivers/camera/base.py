@@ -115,7 +115,10 @@ class CameraSource(ABC):
     # ------------------------------------------------------------------ backend interface
     @abstractmethod
     def _open(self) -> None:
-        """Open the device (blocking, capture thread). Raise DeviceError when it cannot."""
+        """Open the device (blocking, capture thread). Raise DeviceError when it cannot.
+
+        Any other exception fails ``start()`` at once too, as a DeviceError caused by it.
+        """
 
     @abstractmethod
     def _read(self) -> np.ndarray | None:
@@ -130,7 +133,13 @@ class CameraSource(ABC):
 
     # ------------------------------------------------------------------ public API
     async def start(self) -> None:
-        """Open the device and start capturing. Raises DeviceError/DeviceTimeout if it cannot open."""
+        """Open the device and start capturing.
+
+        Raises:
+            DeviceError: the device cannot be opened, or the backend crashed while opening
+                it (raised from the backend's exception).
+            DeviceTimeout: opening did not finish within ``open_timeout`` seconds.
+        """
         if self._thread is not None:
             raise RuntimeError(f"camera {self.name} is already started")
         self._loop = asyncio.get_running_loop()
@@ -253,8 +262,10 @@ class CameraSource(ABC):
         try:
             try:
                 self._open()
-            except DeviceError as exc:
-                self._call_loop(_set_exception, opened, exc)
+            except Exception as exc:  # start() must fail now, not after open_timeout
+                failure = exc if isinstance(exc, DeviceError) else _open_crash(self.name, exc)
+                error = str(failure)
+                self._call_loop(_set_exception, opened, failure)
                 return
             self._call_loop(_set_result, opened)
             error = self._capture_loop()
@@ -320,6 +331,17 @@ class CameraSource(ABC):
                 self._n_reconnects += 1
             return None
         return None
+
+
+def _open_crash(name: str, exc: Exception) -> DeviceError:
+    """The DeviceError that ``start()`` raises for a backend that crashed while opening."""
+    kind = type(exc)
+    module = "" if kind.__module__ == "builtins" else f"{kind.__module__}."
+    err = DeviceError(
+        f"camera {name} could not be opened: the backend failed with {module}{kind.__name__}: {exc}"
+    )
+    err.__cause__ = exc  # as ``raise ... from exc`` would, across the thread boundary
+    return err
 
 
 def _set_result(fut: asyncio.Future[None]) -> None:

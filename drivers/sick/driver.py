@@ -31,8 +31,10 @@ reconnects).
 Scans go through a bounded queue that drops the oldest scan when the consumer is slow
 (``dropped`` counts them). A line that is lost — read error, end of file, device node gone,
 or no telegram for ``stall_timeout`` while streaming — is re-opened by name with back-off and
-the initialisation runs again. :meth:`close` stops the output, puts the scanner back to
-9600 baud (so the next start finds it where a power-up would) and closes the port.
+the initialisation runs again, as often as it takes: a failed attempt (silence, a refusal,
+a reply that cannot be decoded) is counted and retried. :meth:`close` stops the output,
+puts the scanner back to 9600 baud (so the next start finds it where a power-up would) and
+closes the port, which it always releases.
 """
 
 from __future__ import annotations
@@ -100,8 +102,12 @@ class LmsStats:
         scans: scans queued; dropped: scans pushed out of the full queue (oldest first).
         bad_scans: 0xB0 telegrams with a good CRC that could not be turned into a scan
             (wrong count for the variant, partial scan, malformed).
-        reconnects: successful re-initialisations after a lost line; disconnects: lost lines.
-        timeouts: request attempts that got no answer; refused: attempts answered with NAK.
+        reconnects: successful re-initialisations after a lost line; disconnects: lost lines;
+            reconnect_failures: attempts to re-open and re-initialise that failed (each is
+            retried with back-off).
+        timeouts: request attempts that got no answer; refused: attempts answered with NAK;
+            bad_replies: initialisations stopped by a reply with a good CRC that could not be
+            decoded (e.g. a status reply too short to hold the variant).
     """
 
     telegrams: int = 0
@@ -114,8 +120,10 @@ class LmsStats:
     bad_scans: int = 0
     reconnects: int = 0
     disconnects: int = 0
+    reconnect_failures: int = 0
     timeouts: int = 0
     refused: int = 0
+    bad_replies: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return asdict(self)
@@ -235,8 +243,10 @@ class LMS2xx(SerialDevice[Telegram, Telegram]):
             bad_scans=self._n_bad,
             reconnects=self._n_reconnects,
             disconnects=self._n_disconnects,
+            reconnect_failures=self._n_failed_reconnects,
             timeouts=self._n_timeouts,
             refused=self._n_refused,
+            bad_replies=self._n_bad_replies,
         )
 
     async def start(self) -> None:
@@ -285,11 +295,14 @@ class LMS2xx(SerialDevice[Telegram, Telegram]):
                 raise
 
     async def close(self) -> None:
-        await super().close()
-        self._closed = True
-        if self._queue.full():
-            self._queue.get_nowait()
-        self._queue.put_nowait(None)
+        """Stop the output, put the scanner back to 9600 baud (best effort), close the port."""
+        try:
+            await super().close()
+        finally:
+            self._closed = True
+            if self._queue.full():
+                self._queue.get_nowait()
+            self._queue.put_nowait(None)
 
     # ------------------------------------------------------------------ requests
     async def _request_once(self, request: Telegram) -> Telegram:

@@ -24,8 +24,8 @@ What it emulates:
   default) unless the line is still busy, in which case that scan is skipped — as the
   scanner does at 38400 baud;
 * faults for tests (:class:`Faults`): garbage bytes between telegrams, flipped bits,
-  truncated telegrams, silence (a broken wire), unplug/replug (with or without a power
-  cycle).
+  truncated telegrams, short replies with a good checksum (which only the reply's decoder
+  can reject), silence (a broken wire), unplug/replug (with or without a power cycle).
 
 Not emulated: configuration writes (0x77) and the other operating modes (mean values,
 partial scans, sub-ranges, fields), real-time scan indices, reflector bits, the status
@@ -93,6 +93,11 @@ class Faults:
         truncate: chance that a telegram is cut short (its tail never sent).
         garbage_max: most garbage bytes in one burst.
         mute: send nothing at all (a broken transmit wire; the scanner still listens).
+        short_replies: reply codes whose telegrams go out with only the first three quarters
+            of their data, framed with a correct checksum (a firmware fault, or another
+            device answering). A short 0xB1 status (114 of 152 bytes) passes the parser's
+            length check and fails the decoder; replies cut below their plausible length
+            are dropped by the parser (the request times out).
     """
 
     garbage: float = 0.0
@@ -100,6 +105,7 @@ class Faults:
     truncate: float = 0.0
     garbage_max: int = 40
     mute: bool = False
+    short_replies: frozenset[int] = frozenset()
 
     def __post_init__(self) -> None:
         for name in ("garbage", "bitflip", "truncate"):
@@ -108,6 +114,9 @@ class Faults:
                 raise ValueError(f"Faults.{name} is a probability in [0, 1], got {p}")
         if self.garbage_max < 1:
             raise ValueError("Faults.garbage_max must be >= 1 byte")
+        if not all(0 <= int(c) <= 0xFF for c in self.short_replies):
+            raise ValueError(f"Faults.short_replies holds reply codes (bytes), got {set(self.short_replies)}")
+        object.__setattr__(self, "short_replies", frozenset(int(c) for c in self.short_replies))
 
 
 @dataclass(frozen=True)
@@ -126,6 +135,7 @@ class SimState:
     requests: int
     naks_sent: int
     garbage_received: int
+    short_replies_sent: int
     pts: str | None
 
 
@@ -206,6 +216,7 @@ class VirtualLMS:
         self._requests = 0
         self._naks = 0
         self._garbage_in = 0
+        self._short_sent = 0
 
     # ------------------------------------------------------------------ lifecycle
     @property
@@ -224,6 +235,9 @@ class VirtualLMS:
             self._link = self._own_dir / "lms0"
         self._wake_r, self._wake_w = os.pipe()
         self._t0 = time.monotonic()
+        # the first ray cast loads (or compiles) the numba caster, 0.3 s or more: pay it now,
+        # not as a silent gap before the first scan (a real scanner streams at once)
+        self._scan_telegram(self._t0)
         self._plug()
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="virtual-lms", daemon=True)
@@ -274,6 +288,7 @@ class VirtualLMS:
                 requests=self._requests,
                 naks_sent=self._naks,
                 garbage_received=self._garbage_in,
+                short_replies_sent=self._short_sent,
                 pts=self._pts,
             )
 
@@ -383,8 +398,12 @@ class VirtualLMS:
         self._line_free = max(now, self._line_free) + len(data) * 10.0 / self._baud
 
     def _send_telegram(self, t: Telegram) -> None:
-        raw = bytearray(t.encode())
         f = self._faults
+        if t.command in f.short_replies:
+            t = replace(t, data=t.data[: 3 * len(t.data) // 4])
+            with self._lock:
+                self._short_sent += 1
+        raw = bytearray(t.encode())
         rng = self._rng
         prefix = b""
         if f.garbage and rng.random() < f.garbage:

@@ -21,6 +21,7 @@ import cv2
 import numpy as np
 
 from knowledge.errors import MapError
+from knowledge.metric.beams import beam_angles
 from knowledge.metric.grid import OccupancyGrid
 
 Pose = tuple[float, float, float]
@@ -185,8 +186,10 @@ class LmsWorld:
     ) -> np.ndarray:
         """``(n_beams,)`` float32 ranges in metres at time ``t``; ``max_range`` where nothing is hit.
 
-        Beams span ``[angle_min, angle_min + fov]`` (default ``angle_min = -fov/2``) relative to
-        the sensor heading, as :func:`knowledge.metric.beams.beam_angles` lays them out.
+        Beams point where :func:`knowledge.metric.beams.beam_angles` lays them out, relative to
+        the sensor heading: ``[angle_min, angle_min + fov]`` inclusive with ``angle_min``
+        defaulting to ``-fov/2``, or for a full circle (``fov`` = 2π) ``angle_min + i·2π/n``
+        with ``angle_min`` defaulting to 0.
         """
         pose = self.sensor_pose(t)
         grid_r = np.asarray(
@@ -203,8 +206,7 @@ class LmsWorld:
             ),
             dtype=np.float64,
         ).reshape(-1)
-        start = -fov / 2 if angle_min is None else angle_min
-        rel = start + np.arange(n_beams) * (fov / (n_beams - 1) if n_beams > 1 else 0.0)
+        rel = beam_angles(n_beams, fov, angle_min)  # the caster's layout: legs and walls agree
         r = grid_r
         if self.legs:
             centres = np.array([leg.at(t) for leg in self.legs])

@@ -109,6 +109,24 @@ STREAMS: dict[str, StreamSpec] = {
             "dialogue/say", "loci.say/1", "agent → dialogue", Policy.WAIT, "what the robot wants said"
         ),
         StreamSpec("dialogue/ask", "loci.ask/1", "agent → dialogue", Policy.WAIT, "a question to a person"),
+        StreamSpec("base/cmd", "loci.twist/1", "agent → base", Policy.WAIT, "velocity command"),
+        StreamSpec(
+            "base/goal", "loci.base_goal/1", "agent → base", Policy.WAIT, "a goal pose or a path of waypoints"
+        ),
+        StreamSpec(
+            "base/status",
+            "loci.base_status/1",
+            "base → agent",
+            Policy.WAIT,
+            "what the base does: goal active, reached, failed, collided",
+        ),
+        StreamSpec(
+            "sim/truth",
+            "loci.truth/1",
+            "simulator → evaluation",
+            Policy.DROP_OLDEST,
+            "the simulated robot's true pose and place class (for evaluation only)",
+        ),
     )
 }
 

@@ -467,33 +467,231 @@ ERROR = MessageSchema(
     description="an error answer to a query or request",
 )
 
+# ---- the dialogue (agent/dialogue_agent.py, agent/dialogue/, docs/dialogue.md) ----------------
+
+#: What a ``loci.intent/1`` can ask of the agent, and the ``args`` each kind takes.
+INTENT_KINDS = (
+    "assert_type",
+    "assert_name",
+    "assert_object",
+    "ask_place",
+    "ask_where",
+    "follow_me",
+    "look_around",
+    "go_to",
+    "stop",
+    "answer",
+)
+#: ``loci.say/1`` statuses: the answer or the command's outcome, a long command started, a refusal.
+SAY_STATUSES = ("ok", "accepted", "error")
+_ID = string(max_length=128, description="an identifier chosen by the sender (unique per sender)")
+_WORDS = string(max_length=200)
+_SPEAKER = string(max_length=128, description="who speaks (a person's name, or 'tutor')")
+#: A noun phrase naming what an intent is about: "the television", "a room with a couch".
+TARGET = obj(
+    {"head": _WORDS},
+    {
+        "determiner": string(choices=("the", "a"), nullable=True),
+        "with": array(_WORDS, max_items=8, description="objects the referent has: 'a room with a couch'"),
+        "text": string(max_length=400, description="the phrase as said"),
+    },
+    extra=False,
+    description="a referring expression: head noun ('television', 'kitchen', 'room') and its objects",
+)
+_NONE = obj({}, extra=False)
+#: ``args`` of each intent kind.
+INTENT_ARGS: dict[str, Spec] = {
+    "assert_type": obj({"type": _WORDS}, extra=False, description="'You are in the corridor'"),
+    "assert_name": obj({"name": _WORDS}, extra=False, description="'I call it the recreation room'"),
+    "assert_object": obj({"object": _WORDS}, extra=False, description="'This is the charging station'"),
+    "ask_place": _NONE,
+    "ask_where": obj({"target": TARGET}, extra=False),
+    "follow_me": _NONE,
+    "look_around": _NONE,
+    "go_to": obj({"target": TARGET}, extra=False),
+    "stop": _NONE,
+    "answer": obj(
+        {"answer": string(max_length=400, description="'yes', 'no', or a choice the question offered")},
+        {
+            "question": string(
+                max_length=128, nullable=True, description="the loci.ask/1 id (none: the latest)"
+            )
+        },
+        extra=False,
+    ),
+}
+
+
+def _intent_checks(message: dict[str, Any]) -> str | None:
+    kind = message["intent"]
+    try:
+        _check(INTENT_ARGS[kind], message.get("args", {}), "args")
+    except ProtocolError as exc:
+        return f"{kind}: {exc}"
+    return None
+
+
 UTTERANCE = MessageSchema(
     "loci.utterance",
     1,
-    obj({"text": string(max_length=10_000)}, {"stamp": _STAMP, "speaker": string(max_length=128)}),
-    description="something a person said (speech recognition output)",
+    obj(
+        {"text": string(max_length=10_000)},
+        {
+            "stamp": _STAMP,
+            "speaker": _SPEAKER,
+            "id": _ID,
+            "source": string(max_length=128, description="the recogniser or 'console'"),
+        },
+    ),
+    description="something a person said (a speech recogniser's or a console's text)",
 )
 
 INTENT = MessageSchema(
     "loci.intent",
     1,
-    obj({"intent": string(max_length=128)}, {"stamp": _STAMP, "args": mapping(Spec("any")), "id": string()}),
-    description="a structured request to the agent (provisional, owned by the dialogue work)",
+    obj(
+        {"id": _ID, "speaker": _SPEAKER, "intent": string(choices=INTENT_KINDS)},
+        {
+            "args": mapping(Spec("any"), description="the kind's arguments (see INTENT_ARGS)"),
+            "stamp": _STAMP,
+            "text": string(max_length=10_000, description="the utterance it was understood from"),
+        },
+    ),
+    checks=(_intent_checks,),
+    description="a structured request to the agent; every intent gets exactly one reply",
 )
 
 SAY = MessageSchema(
     "loci.say",
     1,
-    obj({"text": string(max_length=10_000)}, {"stamp": _STAMP}),
-    description="what the robot wants said",
+    obj(
+        {"text": string(max_length=10_000)},
+        {
+            "stamp": _STAMP,
+            "in_reply_to": string(max_length=128, nullable=True, description="the intent this replies to"),
+            "status": string(choices=SAY_STATUSES, description="default ok"),
+            "reason": string(max_length=2000, nullable=True, description="why an intent was refused"),
+            "task": string(
+                max_length=128, nullable=True, description="the intent whose task this reports on"
+            ),
+            "intent": string(max_length=64, nullable=True, description="the kind of the intent replied to"),
+            "to": string(max_length=128, nullable=True, description="the speaker addressed"),
+            "content": mapping(Spec("any"), description="the answer as data (area, objects, node, path)"),
+        },
+    ),
+    description="what the robot says: a reply to an intent, a report on a task, or a remark",
 )
 
 ASK = MessageSchema(
     "loci.ask",
     1,
-    obj({"text": string(max_length=10_000)}, {"stamp": _STAMP, "choices": array(string()), "id": string()}),
-    description="a question the robot wants asked",
+    obj(
+        {
+            "id": _ID,
+            "text": string(max_length=10_000),
+            "choices": array(_WORDS, min_items=1, max_items=16, description="the answers expected"),
+        },
+        {
+            "stamp": _STAMP,
+            "in_reply_to": string(max_length=128, nullable=True, description="the intent this replies to"),
+            "about": mapping(Spec("any"), description="what is unclear, e.g. {kind: false_doorway, node: 7}"),
+            "to": string(max_length=128, nullable=True, description="the speaker addressed"),
+        },
+    ),
+    description="a question the robot asks; answered by a loci.intent/1 'answer' naming its id",
 )
 
 #: The registry of the project's JSON messages.
 SCHEMAS = SchemaRegistry([PLACE, GRAPH, AREAS, DIAGNOSTICS, ERROR, UTTERANCE, INTENT, SAY, ASK])
+
+
+# ---- the (simulated) base: commands, status, ground truth --------------------------------
+
+_POSE = {
+    "x": number(description="metres"),
+    "y": number(description="metres"),
+    "theta": number(description="heading, radians, counter-clockwise"),
+}
+_WAYPOINT = obj(
+    {"x": number(description="metres"), "y": number(description="metres")},
+    {"theta": number(nullable=True, description="heading there, radians (the last point's: the goal's)")},
+)
+#: What a base can report it is doing (``loci.base_status/1``).
+BASE_STATUSES = ("idle", "velocity", "route", "active", "reached", "collided", "failed", "cancelled")
+
+
+def _goal_checks(message: dict[str, Any]) -> str | None:
+    if message.get("cancel"):
+        return None
+    if (message.get("goal") is not None) == bool(message.get("path")):
+        return "give either 'goal' (a pose) or 'path' (waypoints), or 'cancel': true"
+    return None
+
+
+TWIST = MessageSchema(
+    "loci.twist",
+    1,
+    obj(
+        {
+            "v": number(minimum=-10, maximum=10, description="forward speed, m/s"),
+            "omega": number(minimum=-20, maximum=20, description="turn rate, rad/s, counter-clockwise"),
+        },
+        {"stamp": _STAMP},
+    ),
+    description="a velocity command for the base (it stops when commands stop coming)",
+)
+
+BASE_GOAL = MessageSchema(
+    "loci.base_goal",
+    1,
+    obj(
+        {},
+        {
+            "id": string(max_length=128, description="names the goal in status reports; repeats are ignored"),
+            "stamp": _STAMP,
+            "frame_id": string(choices=("odom", "map"), description="frame of the points (default odom)"),
+            "goal": _WAYPOINT,
+            "path": array(_WAYPOINT, min_items=1, max_items=10_000),
+            "plan": boolean(description="plan around obstacles (default true); false: straight lines"),
+            "cancel": boolean(description="stop whatever the base is doing"),
+        },
+    ),
+    checks=(_goal_checks,),
+    description="where the base should go: a pose, or a path of waypoints ending at the goal",
+)
+
+BASE_STATUS = MessageSchema(
+    "loci.base_status",
+    1,
+    obj(
+        {"stamp": _STAMP, "status": string(choices=BASE_STATUSES)},
+        {
+            "goal": string(
+                max_length=128, nullable=True, description="the goal's id ('route': a scripted route)"
+            ),
+            "reason": string(max_length=2000, nullable=True),
+            "pose": obj(_POSE, description="odometry pose (frame odom)"),
+            "distance": number(minimum=0, description="metres driven so far"),
+        },
+    ),
+    description="what the base does: a goal became active, was reached, failed, or the base collided",
+)
+
+TRUTH = MessageSchema(
+    "loci.truth",
+    1,
+    obj(
+        {"stamp": _STAMP, **_POSE},
+        {
+            "frame_id": string(max_length=64),
+            "odom": obj(_POSE, description="the odometry pose at the same instant"),
+            "space": integer(minimum=0, description="the building's space id there (0: none)"),
+            "label": string(max_length=64, nullable=True, description="the place class there"),
+            "collisions": integer(minimum=0),
+        },
+    ),
+    description="the simulated robot's true pose (frame map) and place class, for evaluation only",
+)
+
+for _schema in (TWIST, BASE_GOAL, BASE_STATUS, TRUTH):
+    SCHEMAS.register(_schema)

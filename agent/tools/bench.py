@@ -35,6 +35,12 @@ BENCHMARKS: list[tuple[str, str, list[str], str]] = [
     ("topology", "agent.tools.bench_topology", [], "relaxation and regions on office_g"),
     ("sick", "agent.tools.bench_sick", [], "SICK telegram codec vs the 500 kbaud line rate"),
     ("people", "agent.tools.bench_people", [], "leg detection per 768-beam scan vs 75 Hz"),
+    (
+        "agent",
+        "agent.tools.bench_agent",
+        [],
+        "the agent per scan: latency telegram → place (target p99 < 5 ms), sustained rate, memory over an hour",
+    ),
 ]
 
 #: benchmarks whose --json takes a file (the others print JSON with --json)

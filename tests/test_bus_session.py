@@ -137,3 +137,26 @@ def test_a_process_with_a_callback_subscriber_exits() -> None:
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.split() == ["subscribed", "done"]
     assert time.monotonic() - t0 < 30
+
+
+def test_config_file_is_the_base_and_the_typed_keys_go_over_it(tmp_path: Path) -> None:
+    f = tmp_path / "agent.json5"
+    f.write_text(
+        '{ mode: "client", transport: { auth: { usrpwd: { user: "agent", password: "s3cret" } } } }',
+        encoding="utf-8",
+    )
+    cfg = BusConfig(mode="peer", listen=("tcp/127.0.0.1:0",), config_file=str(f)).zenoh_config()
+    assert json.loads(cfg.get_json("transport/auth/usrpwd/user")) == "agent"
+    assert json.loads(cfg.get_json("mode")) == "peer"  # the typed key wins over the file
+    with bus_session(BusConfig(listen=("tcp/127.0.0.1:0",), config_file=str(f))) as session:
+        assert listening_endpoints(session)
+
+
+def test_a_bad_config_file_is_a_config_error_naming_it(tmp_path: Path) -> None:
+    missing = tmp_path / "nope.json5"
+    with pytest.raises(ConfigError, match=r"nope\.json5"):
+        BusConfig(config_file=str(missing)).zenoh_config()
+    bad = tmp_path / "bad.json5"
+    bad.write_text("{ mode: ", encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"bad\.json5"):
+        BusConfig(config_file=str(bad)).zenoh_config()

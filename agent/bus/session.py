@@ -48,12 +48,15 @@ class BusConfig:
         listen: endpoints to accept connections on (peer mode only); port 0 picks a free port.
         connect: endpoints to connect to (other peers, or a router); retried in the background.
         multicast_scouting: find peers by UDP multicast (off: it fails in containers).
+        config_file: a Zenoh JSON5 configuration to start from (user/password, TLS, access
+            control: see deploy/zenoh/); mode, endpoints and scouting above are set over it.
     """
 
     mode: str = "peer"
     listen: tuple[str, ...] = ("tcp/127.0.0.1:0",)
     connect: tuple[str, ...] = ()
     multicast_scouting: bool = False
+    config_file: str | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "listen", tuple(self.listen))
@@ -67,6 +70,8 @@ class BusConfig:
                         f"bus.{key}: {ep!r} is not a Zenoh endpoint; write PROTOCOL/ADDRESS, "
                         "e.g. 'tcp/127.0.0.1:7447'"
                     )
+        if self.config_file is not None and not isinstance(self.config_file, str):
+            raise ConfigError("bus.config_file must be the path of a Zenoh JSON5 file")
         if self.mode == "client" and self.listen:
             raise ConfigError("bus.listen must be empty in client mode (clients do not accept connections)")
         if self.mode == "client" and not self.connect and not self.multicast_scouting:
@@ -103,7 +108,7 @@ class BusConfig:
 
     def zenoh_config(self) -> zenoh.Config:
         """The :class:`zenoh.Config` of this configuration."""
-        cfg = zenoh.Config()
+        cfg = zenoh.Config() if self.config_file is None else self._load_file(self.config_file)
         cfg.insert_json5("mode", json.dumps(self.mode))
         cfg.insert_json5("scouting/multicast/enabled", json.dumps(self.multicast_scouting))
         cfg.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
@@ -112,6 +117,15 @@ class BusConfig:
             cfg.insert_json5("adminspace/enabled", "true")
             cfg.insert_json5("adminspace/permissions", json.dumps({"read": True, "write": False}))
         return cfg
+
+    @staticmethod
+    def _load_file(path: str) -> zenoh.Config:
+        try:
+            return zenoh.Config.from_file(path)
+        except (zenoh.ZError, OSError) as exc:
+            raise ConfigError(
+                f"bus.config_file: cannot use {path!r} as a Zenoh configuration: {exc}"
+            ) from exc
 
 
 def open_session(config: BusConfig | None = None) -> zenoh.Session:

@@ -26,6 +26,7 @@ COMMAND_MODULES: list[str] = [
     "agent.commands.run",
     "agent.commands.replay",
     "agent.commands.dialogue",
+    "agent.commands.objects",
 ]
 
 

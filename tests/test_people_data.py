@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import sys
@@ -121,6 +122,8 @@ def test_cli_train_and_evaluate_end_to_end(shared_data: Path, tmp_path: Path) ->
         "30",
         "--rounds",
         "20",
+        "--threshold",
+        "train-cv",
         "--out",
         str(model),
         "--json",
@@ -129,6 +132,8 @@ def test_cli_train_and_evaluate_end_to_end(shared_data: Path, tmp_path: Path) ->
     summary = json.loads(out.stdout)
     assert summary["rounds"] <= 20 and summary["people_segments"] > 0
     assert model.is_file()
+    # the threshold came from the training split's cross-validation and is stored in the model
+    assert math.isfinite(summary["threshold"]) and summary["threshold"] != 0.0
     out = loci(
         "evaluate", "--model", str(model), "--max-scans", "30", "--json", env={"LOCI_DATA": str(shared_data)}
     )
@@ -141,6 +146,7 @@ def test_cli_train_and_evaluate_end_to_end(shared_data: Path, tmp_path: Path) ->
     fn = 100.0 * c["people"]["non_people"] / c["people"]["total"]
     assert result["false_negative_rate_pct"] == pytest.approx(fn)
     assert len(result["top_features"]) == 5
+    assert result["detector"]["threshold"] == summary["threshold"]
     assert {"false_positive_rate_pct", "targets", "beams", "per_file", "diagnostics"} <= set(result)
 
 

@@ -20,7 +20,9 @@ serial port or scans from the bus, and the laser's mount on the robot; ``[odomet
 scans wait for odometry; ``[places]`` the place model and the label window N;
 ``[navigation]`` (and ``[navigation.doorways]``) the graph and the doorway detector;
 ``[local_map]``, ``[rear_beams]`` the 360° scan of a front laser (Sect. 3.5); ``[state]``
-where the graph persists; ``[record]`` an optional MCAP recording; ``[diagnostics]``.
+where the graph persists; ``[record]`` an optional MCAP recording; ``[diagnostics]``;
+``[camera]`` the camera's frames; ``[conceptual]`` the conceptual map (OWL, reasoner);
+``[objects]`` the object database of the recogniser; ``[follow]`` follow-me.
 """
 
 from __future__ import annotations
@@ -70,7 +72,15 @@ ENV_VARS: dict[str, tuple[str, str, Callable[[str], Any]]] = {
 CONFIG_ENV = "LOCI_CONFIG"
 
 # keys holding paths, resolved against the config file's folder when they come from it
-_PATH_KEYS = {("places", "model"), ("state", "dir"), ("record", "path")}
+_PATH_KEYS = {
+    ("places", "model"),
+    ("state", "dir"),
+    ("record", "path"),
+    ("conceptual", "state"),
+    ("objects", "database"),
+}
+# keys holding lists of paths, resolved the same way
+_PATH_LIST_KEYS = {("conceptual", "ontologies")}
 
 
 # ---------------------------------------------------------------------------- sections
@@ -254,6 +264,94 @@ class DiagnosticsConfig:
 
 
 @dataclass(frozen=True)
+class CameraConfig:
+    """``[camera]``: where frames come from and their size.
+
+    Attributes:
+        source: ``""`` (default): frames arrive on ``loci/<robot>/camera`` from another
+            process (the simulator, a camera driver); otherwise what a camera driver opens:
+            ``"sim://..."``, a device index ``"0"``, a device path ``"/dev/video0"`` or a
+            stream URL ``"rtsp://..."``.
+        width, height: pixels wanted from the device.
+        fps: frames per second wanted from the device.
+    """
+
+    source: str = ""
+    width: int = 640
+    height: int = 480
+    fps: float = 10.0
+
+    def __post_init__(self) -> None:
+        if self.width < 1 or self.height < 1:
+            raise ValueError(f"width and height must be >= 1 pixel, got {self.width} x {self.height}")
+        if not (math.isfinite(self.fps) and self.fps > 0):
+            raise ValueError(f"fps must be > 0 frames per second, got {self.fps}")
+
+
+@dataclass(frozen=True)
+class ConceptualConfig:
+    """``[conceptual]``: the conceptual map (OWL ontology, HermiT reasoner, Sect. 7.2.4).
+
+    Attributes:
+        enabled: run the conceptual service; default (unset): on when the configuration has
+            a ``[conceptual]`` section, off otherwise (the reasoner needs Java).
+        state: the SQLite file of the map (default ``<state.dir>/concepts.sqlite3``).
+        ontologies: extra OWL files loaded besides the bundled one.
+        java: the ``java`` executable (``""``: found automatically).
+        debounce: seconds the reasoner waits for more changes before it runs.
+    """
+
+    enabled: bool | None = None
+    state: str = ""
+    ontologies: tuple[str, ...] = ()
+    java: str = ""
+    debounce: float = 0.2
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.debounce) and self.debounce >= 0):
+            raise ValueError(f"debounce must be >= 0 seconds, got {self.debounce}")
+
+    @property
+    def on(self) -> bool:
+        return bool(self.enabled)
+
+
+@dataclass(frozen=True)
+class ObjectsConfig:
+    """``[objects]``: the object instances the camera recognises (Sect. 7.3).
+
+    Attributes:
+        database: the folder of the object database (``loci objects add``; default
+            ``<state.dir>/objects``); recognition runs when it exists.
+        min_inliers: RANSAC inliers a recognition needs.
+    """
+
+    database: str = ""
+    min_inliers: int = 12
+
+    def __post_init__(self) -> None:
+        if self.min_inliers < 4:
+            raise ValueError(
+                f"min_inliers must be >= 4 (a homography needs 4 points), got {self.min_inliers}"
+            )
+
+
+@dataclass(frozen=True)
+class FollowConfig:
+    """``[follow]``: follow-me (Sect. 7.4): keep ``distance`` metres behind the person; the
+    person is lost after ``lost_after`` seconds without seeing them."""
+
+    distance: float = 1.0
+    lost_after: float = 2.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.distance) and self.distance > 0):
+            raise ValueError(f"distance must be > 0 metres, got {self.distance}")
+        if not (math.isfinite(self.lost_after) and self.lost_after > 0):
+            raise ValueError(f"lost_after must be > 0 seconds, got {self.lost_after}")
+
+
+@dataclass(frozen=True)
 class AgentConfig:
     """The whole configuration (see the module docstring); build it with :func:`load_config`."""
 
@@ -269,6 +367,10 @@ class AgentConfig:
     state: StateConfig = field(default_factory=StateConfig)
     record: RecordConfig = field(default_factory=RecordConfig)
     diagnostics: DiagnosticsConfig = field(default_factory=DiagnosticsConfig)
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    conceptual: ConceptualConfig = field(default_factory=ConceptualConfig)
+    objects: ObjectsConfig = field(default_factory=ObjectsConfig)
+    follow: FollowConfig = field(default_factory=FollowConfig)
     file: Path | None = None
 
     @property
@@ -370,6 +472,10 @@ _SECTIONS = (
     "state",
     "record",
     "diagnostics",
+    "camera",
+    "conceptual",
+    "objects",
+    "follow",
 )
 
 
@@ -432,6 +538,15 @@ def load_config(
             if isinstance(v, str) and v and not (section == "places" and v == "default"):
                 p = Path(v).expanduser()
                 data[section][key] = str(p if p.is_absolute() else base / p)
+        for section, key in _PATH_LIST_KEYS:
+            v = data.get(section, {}).get(key)
+            if isinstance(v, list):
+                data[section][key] = [
+                    str(q if (q := Path(x).expanduser()).is_absolute() else base / q)
+                    if isinstance(x, str)
+                    else x
+                    for x in v
+                ]
     for var, (section, key, parse) in ENV_VARS.items():
         text = env.get(var)
         if text:
@@ -484,6 +599,14 @@ def _build(data: Mapping[str, Mapping[str, Any]], file: Path | None, env: Mappin
     state = build_dataclass(StateConfig, sec("state"), "state")
     if not state.dir:
         state = dataclasses.replace(state, dir=str(default_state_dir(robot.name, env)))
+    conceptual = build_dataclass(ConceptualConfig, sec("conceptual"), "conceptual")
+    if conceptual.enabled is None:
+        conceptual = dataclasses.replace(conceptual, enabled="conceptual" in data)
+    if not conceptual.state:
+        conceptual = dataclasses.replace(conceptual, state=str(Path(state.dir) / "concepts.sqlite3"))
+    objects = build_dataclass(ObjectsConfig, sec("objects"), "objects")
+    if not objects.database:
+        objects = dataclasses.replace(objects, database=str(Path(state.dir) / "objects"))
     return AgentConfig(
         robot=robot,
         bus=bus,
@@ -499,5 +622,9 @@ def _build(data: Mapping[str, Mapping[str, Any]], file: Path | None, env: Mappin
         state=state,
         record=build_dataclass(RecordConfig, sec("record"), "record"),
         diagnostics=build_dataclass(DiagnosticsConfig, sec("diagnostics"), "diagnostics"),
+        camera=build_dataclass(CameraConfig, sec("camera"), "camera"),
+        conceptual=conceptual,
+        objects=objects,
+        follow=build_dataclass(FollowConfig, sec("follow"), "follow"),
         file=file,
     )

@@ -58,7 +58,15 @@ from typing import Any, TypeVar
 
 import zenoh
 
-from agent.bus.bridge import BusClosed, BusStats, Publisher, RawSample, Subscription, publish_stream
+from agent.bus.bridge import (
+    BusClosed,
+    BusStats,
+    Publisher,
+    RawSample,
+    Subscription,
+    publish_stream,
+    subscribe_stream,
+)
 from agent.bus.codecs import (
     LASER_SCAN_CODEC,
     POSE_CODEC,
@@ -73,6 +81,7 @@ from agent.bus.queryable import StateCell, StateQueryable
 from agent.bus.scene import areas_scene, graph_scene
 from agent.bus.session import close_session, listening_endpoints, open_session
 from agent.config import AgentConfig
+from agent.dialogue_agent import DialogueAgent, MemoryConcepts, Outgoing, run_dialogue
 from agent.odom_sync import Matched, OdomSync
 from agent.pipeline import Pipeline, PipelineParams, StepResult, place_message
 from agent.recording.recorder import McapSink, Recorder, recording_metadata
@@ -81,6 +90,7 @@ from knowledge.errors import ConfigError, DataError, ProtocolError
 from knowledge.fileio import atomic_write_text
 from knowledge.navigation import persistence
 from knowledge.places.model import PlaceModel
+from knowledge.topology.areas import AreaCreated
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -221,6 +231,13 @@ class Agent:
         self._odom_sub: Subscription[tuple[float, Pose2D]] | None = None
         self._scan_sub: Subscription[tuple[float, LaserScan]] | None = None
         self._warned_no_odom = -math.inf
+        self.concepts: Any = None
+        self.dialogue: DialogueAgent | None = None
+        self._recogniser: Any = None
+        self._intent_sub: Subscription[bytes] | None = None
+        self._status_sub: Subscription[Any] | None = None
+        self._camera_sub: Subscription[Any] | None = None
+        self._concepts_version: Any = None
 
     # ------------------------------------------------------------------ setup
     def _load(self) -> tuple[PlaceModel, Pipeline]:
@@ -283,8 +300,12 @@ class Agent:
             "diagnostics",
         ):
             self._pubs[stream] = publish_stream(session, self.robot, stream, stats=self.stats)
+        for stream in ("dialogue/say", "dialogue/ask", "base/goal", "base/cmd", "people", "objects"):
+            self._pubs[stream] = publish_stream(session, self.robot, stream, stats=self.stats)
         if self.config.laser.source == "lms":
             self._pubs["scan"] = publish_stream(session, self.robot, "scan", stats=self.stats)
+        if self.config.conceptual.on:
+            self._cells["concepts"] = StateCell("loci.concepts/1")
         return [StateQueryable(session, self.keys.state(name), cell) for name, cell in self._cells.items()]
 
     def _subscribe(
@@ -308,6 +329,19 @@ class Agent:
         cfg = self.config
         model, pipeline = await asyncio.to_thread(self._load)
         self.pipeline = pipeline
+        self.concepts = await self._start_concepts()
+        self._recogniser = await asyncio.to_thread(self._load_recogniser)
+        self.dialogue = DialogueAgent(
+            pipeline,
+            self.concepts,
+            can_recognise=self._recogniser is not None,
+            follow_factory=self._follow_factory(),
+            on_map_changed=self._map_changed,
+        )
+        # what the map already holds (a resumed map) goes to the concepts first
+        self.dialogue.on_area_events(
+            [AreaCreated(a.id, a.label, a.nodes) for a in pipeline.areas.areas.values()]
+        )
         record_path = self._recording_path()
         sink: McapSink | None = None
         recorder: Recorder | None = None
@@ -339,6 +373,7 @@ class Agent:
             else:
                 self._scan_sub = self._subscribe(session, "scan", LASER_SCAN_CODEC)
                 tasks["laser"] = asyncio.create_task(self._scan_bus_task(), name="laser")
+            self._start_dialogue(session, tasks)
             tasks["housekeeping"] = asyncio.create_task(self._housekeeping_task(), name="housekeeping")
             tasks["diagnostics"] = asyncio.create_task(
                 publish_diagnostics(
@@ -446,6 +481,7 @@ class Agent:
                 )
             if self._dirty and time.monotonic() - self._last_save >= interval:
                 await self._save()
+            self._update_concepts_cell()
 
     # ------------------------------------------------------------------ per scan
     def _feed(self, matched: list[Matched]) -> None:
@@ -484,6 +520,12 @@ class Agent:
             self._dirty = True
         for event in result.events:
             log.info("areas: %s", event)
+        if self.dialogue is not None:
+            if result.events:
+                self.dialogue.on_area_events(result.events)
+            p = result.pose
+            for out in self.dialogue.on_scan(result.scan, (p.x, p.y, p.theta)):
+                self._send(out)
 
     def _publish_state(self, stamp: float, *, force: bool = False) -> None:
         """Publish the graph and areas (messages and scenes) if they changed since the last time."""
@@ -504,6 +546,152 @@ class Agent:
             assert data is not None
             self._pubs["areas"].put_bytes(data)
             self._pubs["areas/scene"].put(areas_scene(areas, graph))
+
+    # ------------------------------------------------------------------ dialogue, concepts, camera
+    async def _start_concepts(self) -> Any:
+        """The conceptual service when ``[conceptual]`` is on (started), else :class:`MemoryConcepts`.
+
+        Raises:
+            ConfigError: the service cannot run (no Java, the module missing); the message says why.
+        """
+        cc = self.config.conceptual
+        if not cc.on:
+            return MemoryConcepts()
+        try:
+            from agent.conceptual_service import ConceptualService
+        except ImportError as exc:
+            raise ConfigError(
+                f"[conceptual] is on but the conceptual map cannot be loaded ({exc}); "
+                "set conceptual.enabled = false to run without it"
+            ) from exc
+        import inspect
+
+        kwargs: dict[str, Any] = {}
+        if "debounce" in inspect.signature(ConceptualService).parameters:
+            kwargs["debounce"] = cc.debounce
+        service = ConceptualService(
+            Path(cc.state), [Path(p) for p in cc.ontologies], cc.java or None, **kwargs
+        )
+        await service.start()
+        log.info("conceptual map: %s", cc.state)
+        return service
+
+    async def _close_concepts(self) -> None:
+        close = getattr(self.concepts, "close", None)
+        if close is None or isinstance(self.concepts, MemoryConcepts):
+            return
+        try:
+            await close()
+        except Exception as exc:
+            log.error("closing the conceptual map failed: %s", exc)
+
+    def _load_recogniser(self) -> Any:
+        """The object recogniser when the ``[objects]`` database folder exists (else None)."""
+        folder = Path(self.config.objects.database)
+        if not folder.is_dir():
+            return None
+        try:
+            from knowledge.objects import ObjectDatabase, ObjectRecogniser, RecognitionParams
+        except ImportError as exc:
+            log.warning("object recognition is not available (%s); look_around will refuse", exc)
+            return None
+        try:
+            params = RecognitionParams(min_inliers=self.config.objects.min_inliers)
+        except TypeError:
+            params = None
+        recogniser = ObjectRecogniser(ObjectDatabase.open(folder), params)
+        log.info("object recognition: %s", folder)
+        return recogniser
+
+    def _follow_factory(self) -> Callable[[], Any] | None:
+        """Makes follow-me controllers with ``[follow]``'s parameters (None: agent.follow is missing)."""
+        try:
+            from agent.follow import FollowMe, FollowParams
+        except ImportError:
+            return None
+        fc = self.config.follow
+        try:
+            params = FollowParams(distance=fc.distance, lost_after=fc.lost_after)
+        except TypeError:
+            log.warning("agent.follow.FollowParams does not take distance/lost_after; using its defaults")
+            params = None
+        return lambda: FollowMe(params)
+
+    def _start_dialogue(self, session: zenoh.Session, tasks: dict[str, asyncio.Task[Any]]) -> None:
+        assert self.dialogue is not None
+        self._intent_sub = Subscription(
+            session,
+            self.keys.stream("dialogue/intent"),
+            lambda raw: raw.payload,
+            policy=Policy.WAIT,
+            capacity=64,
+            stats=self.stats,
+            name="dialogue/intent",
+        )
+        self._status_sub = subscribe_stream(session, self.robot, "base/status", stats=self.stats)
+        intent_stats = self.stats.stream("dialogue/intent")
+        tasks["dialogue"] = asyncio.create_task(
+            run_dialogue(
+                self.dialogue,
+                self._intent_sub,
+                self._status_sub,
+                self._send,
+                invalid=lambda: intent_stats.add("invalid"),
+            ),
+            name="dialogue",
+        )
+        if self._recogniser is not None:
+            self._camera_sub = subscribe_stream(session, self.robot, "camera", capacity=1, stats=self.stats)
+            tasks["camera"] = asyncio.create_task(self._camera_task(), name="camera")
+
+    def _send(self, out: Outgoing) -> None:
+        self._pubs[out.stream].put(out.message)
+
+    def _map_changed(self) -> None:
+        """The dialogue changed the map (a false doorway removed): publish it, save it soon."""
+        self._publish_state(time.time())
+        self._dirty = True
+
+    def _update_concepts_cell(self) -> None:
+        cell = self._cells.get("concepts")
+        if cell is None or self.concepts is None:
+            return
+        try:
+            snap = self.concepts.snapshot()
+        except Exception as exc:
+            log.debug("no concepts snapshot yet: %s", exc)
+            return
+        version = (snap.get("version"), snap.get("reasoned"))
+        if version == self._concepts_version:
+            return
+        self._concepts_version = version
+        try:
+            cell.set({**snap, "schema": "loci.concepts/1", "stamp": time.time()})
+        except ProtocolError as exc:
+            log.error("the concepts snapshot is not a valid loci.concepts/1: %s", exc)
+
+    async def _camera_task(self) -> None:
+        """Recognise objects in camera frames while the dialogue looks around (newest frame only)."""
+        import cv2
+        import numpy as np
+
+        assert self._camera_sub is not None and self.dialogue is not None
+        with contextlib.suppress(BusClosed):
+            while True:
+                frame = await self._camera_sub.recv()
+                if not self.dialogue.looking or frame.jpeg is None:
+                    continue
+                image = cv2.imdecode(np.frombuffer(frame.jpeg, np.uint8), cv2.IMREAD_COLOR)
+                if image is None:
+                    self.stats.stream("camera").add("invalid")
+                    continue
+                try:
+                    detections = await asyncio.to_thread(self._recogniser.recognise, image)
+                except Exception:
+                    log.exception("object recognition failed on frame %d", frame.seq)
+                    continue
+                for out in await self.dialogue.on_detections(detections, frame.stamp):
+                    self._send(out)
 
     async def _save(self) -> None:
         pipeline = self.pipeline
@@ -557,8 +745,12 @@ class Agent:
                 await asyncio.sleep(TICK / 2)
                 self._drain_odometry()
                 self.sync.expire(time.time())
-            for name in ("housekeeping", "diagnostics", "odometry"):
+            for name in ("housekeeping", "diagnostics", "odometry", "dialogue", "camera"):
                 await _cancel(tasks.get(name))
+            for sub in (self._intent_sub, self._status_sub, self._camera_sub):
+                if sub is not None:
+                    sub.close()
+            await self._close_concepts()
             if self._odom_sub is not None:
                 self._odom_sub.close()
             self.sync.close()

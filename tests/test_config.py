@@ -73,6 +73,26 @@ flush_interval = 0.5
 
 [diagnostics]
 period = 2.0
+
+[camera]
+source = "/dev/video0"
+width = 800
+height = 600
+fps = 15
+
+[conceptual]
+state = "concepts/map.sqlite3"
+ontologies = ["extra.owl", "/abs/more.owl"]
+java = "/usr/bin/java"
+debounce = 0.5
+
+[objects]
+database = "objects"
+min_inliers = 20
+
+[follow]
+distance = 1.5
+lost_after = 3
 """
 
 
@@ -102,6 +122,18 @@ def test_every_key_of_a_full_file_lands_in_its_field(tmp_path: Path) -> None:
     assert (cfg.local_map.radius, cfg.local_map.max_points) == (15.0, 4000)
     assert cfg.rear_beams.hit_radius == 0.1 and cfg.rear_beams.front == "min"
     assert cfg.diagnostics.period == 2.0
+    assert (cfg.camera.source, cfg.camera.width, cfg.camera.height, cfg.camera.fps) == (
+        "/dev/video0",
+        800,
+        600,
+        15.0,
+    )
+    # a [conceptual] section turns the conceptual map on; its paths are relative to the file
+    assert cfg.conceptual.on and cfg.conceptual.java == "/usr/bin/java" and cfg.conceptual.debounce == 0.5
+    assert Path(cfg.conceptual.state) == tmp_path / "concepts" / "map.sqlite3"
+    assert cfg.conceptual.ontologies == (str(tmp_path / "extra.owl"), "/abs/more.owl")
+    assert Path(cfg.objects.database) == tmp_path / "objects" and cfg.objects.min_inliers == 20
+    assert (cfg.follow.distance, cfg.follow.lost_after) == (1.5, 3.0)
     params = PipelineParams.from_config(cfg)
     assert PipelineParams.from_table(params.to_table()) == params
 
@@ -116,6 +148,13 @@ def test_defaults_without_a_file() -> None:
     assert cfg.places.model == "default" and cfg.places.model_path.is_file()
     assert cfg.state.path == Path("/var/lib/x/genius-loci") / cfg.robot_name / "navgraph.json"
     assert cfg.record.path is None
+    # no [conceptual] section: no reasoner (it needs Java); its files default to the state folder
+    assert not cfg.conceptual.on and cfg.conceptual.enabled is False
+    assert Path(cfg.conceptual.state) == cfg.state.path.parent / "concepts.sqlite3"
+    assert Path(cfg.objects.database) == cfg.state.path.parent / "objects"
+    assert cfg.camera.source == "" and cfg.follow.distance == 1.0
+    assert load_config(table={"conceptual": {}}, env={}).conceptual.on
+    assert not load_config(table={"conceptual": {"enabled": False}}, env={}).conceptual.on
     # a router client does not get the agent's default listen endpoint
     client = load_config(table={"bus": {"mode": "client", "connect": ["tcp/10.0.0.1:7447"]}}, env={})
     assert client.bus.listen == ()
@@ -143,6 +182,17 @@ def test_defaults_without_a_file() -> None:
         ({"laser": "ttyUSB0"}, r"laser must be a table"),
         ({"odometry": {"source": "wheels"}}, r"source must be 'bus'"),
         ({"robot": {"name": "has space"}}, r"cannot be part of a Zenoh key"),
+        ({"camera": {"device": "0"}}, r"\[camera\]: unknown key 'device'"),
+        ({"camera": {"width": 0}}, r"\[camera\]: width and height must be >= 1"),
+        ({"camera": {"fps": "10"}}, r"camera.fps must be a number"),
+        ({"conceptual": {"reasoner": "pellet"}}, r"\[conceptual\]: unknown key 'reasoner'"),
+        ({"conceptual": {"ontologies": "my.owl"}}, r"conceptual.ontologies must be a list"),
+        ({"conceptual": {"enabled": "yes"}}, r"conceptual.enabled must be true or false"),
+        ({"conceptual": {"debounce": -1}}, r"debounce must be >= 0"),
+        ({"objects": {"db": "x"}}, r"\[objects\]: unknown key 'db'"),
+        ({"objects": {"min_inliers": 2}}, r"min_inliers must be >= 4"),
+        ({"follow": {"distanse": 1.0}}, r"\[follow\]: unknown key 'distanse'"),
+        ({"follow": {"lost_after": 0}}, r"lost_after must be > 0"),
     ],
 )
 def test_bad_settings_are_errors_that_name_the_key(table: dict[str, object], message: str) -> None:
@@ -202,6 +252,10 @@ def test_docs_list_every_key_and_environment_variable() -> None:
         "diagnostics",
         "local_map",
         "rear_beams",
+        "camera",
+        "conceptual",
+        "objects",
+        "follow",
     ):
         value = getattr(cfg, section)
         for name in value.__dataclass_fields__:

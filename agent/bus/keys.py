@@ -121,6 +121,20 @@ STREAMS: dict[str, StreamSpec] = {
             "what the base does: goal active, reached, failed, collided",
         ),
         StreamSpec(
+            "people",
+            "loci.people/1",
+            "agent → all",
+            Policy.DROP_OLDEST,
+            "people in the laser scans: legs, persons, tracks (while following)",
+        ),
+        StreamSpec(
+            "objects",
+            "loci.objects/1",
+            "agent → all",
+            Policy.DROP_OLDEST,
+            "objects the camera recognised, with the node and area they were seen from",
+        ),
+        StreamSpec(
             "sim/truth",
             "loci.truth/1",
             "simulator → evaluation",
@@ -131,7 +145,12 @@ STREAMS: dict[str, StreamSpec] = {
 }
 
 #: Queryables under ``loci/<robot>/state/``: name → the schema of the reply.
-STATE_KEYS: dict[str, str] = {"graph": "loci.graph/1", "areas": "loci.areas/1", "place": "loci.place/1"}
+STATE_KEYS: dict[str, str] = {
+    "graph": "loci.graph/1",
+    "areas": "loci.areas/1",
+    "place": "loci.place/1",
+    "concepts": "loci.concepts/1",
+}
 
 
 def default_robot_name() -> str:

@@ -576,7 +576,9 @@ SAY = MessageSchema(
             ),
             "intent": string(max_length=64, nullable=True, description="the kind of the intent replied to"),
             "to": string(max_length=128, nullable=True, description="the speaker addressed"),
-            "content": mapping(Spec("any"), description="the answer as data (area, objects, node, path)"),
+            "content": mapping(
+                Spec("any", nullable=True), description="the answer as data (area, objects, node, path)"
+            ),
         },
     ),
     description="what the robot says: a reply to an intent, a report on a task, or a remark",
@@ -594,7 +596,9 @@ ASK = MessageSchema(
         {
             "stamp": _STAMP,
             "in_reply_to": string(max_length=128, nullable=True, description="the intent this replies to"),
-            "about": mapping(Spec("any"), description="what is unclear, e.g. {kind: false_doorway, node: 7}"),
+            "about": mapping(
+                Spec("any", nullable=True), description="what is unclear, e.g. {kind: false_doorway, node: 7}"
+            ),
             "to": string(max_length=128, nullable=True, description="the speaker addressed"),
         },
     ),
@@ -694,4 +698,103 @@ TRUTH = MessageSchema(
 )
 
 for _schema in (TWIST, BASE_GOAL, BASE_STATUS, TRUTH):
+    SCHEMAS.register(_schema)
+
+
+# ---- people, objects, concepts (the conceptual map) ------------------------------------------
+
+_XY = array(number(), min_items=2, max_items=2, description="[x, y] metres")
+
+PEOPLE = MessageSchema(
+    "loci.people",
+    1,
+    obj(
+        {
+            "stamp": _STAMP,
+            "legs": array(_XY, description="leg centroids, tracking frame"),
+            "people": array(obj({"x": number(), "y": number(), "legs": integer(minimum=0, maximum=2)})),
+            "tracks": array(
+                obj(
+                    {"id": integer(minimum=0), "x": number(), "y": number()},
+                    {
+                        "vx": number(description="m/s"),
+                        "vy": number(description="m/s"),
+                        "misses": integer(minimum=0),
+                        "age": integer(minimum=0),
+                    },
+                )
+            ),
+        },
+        {"frame_id": string(max_length=64, description="the tracking frame (odom, or the laser's)")},
+    ),
+    description="people in one laser scan: legs, persons (leg pairs) and confirmed tracks",
+)
+
+_AREA_ID = integer(minimum=0)
+_OBJECT_REF = obj({"name": _WORDS}, {"kind": string(max_length=200, nullable=True)})
+
+OBJECTS = MessageSchema(
+    "loci.objects",
+    1,
+    obj(
+        {
+            "stamp": _STAMP,
+            "recognitions": array(
+                obj(
+                    {"name": _WORDS, "kind": string(max_length=200, nullable=True), "score": number()},
+                    {
+                        "node": integer(minimum=0, nullable=True, description="the node it was seen from"),
+                        "area": integer(minimum=0, nullable=True, description="the area it was seen from"),
+                        "inliers": integer(minimum=0),
+                        "bearing": number(nullable=True, description="radians, left of the camera axis"),
+                    },
+                )
+            ),
+        },
+        {"frame_id": string(max_length=64)},
+    ),
+    description="the object instances the camera recognised in one frame",
+)
+
+
+def _concepts_checks(message: dict[str, Any]) -> str | None:
+    for key, area in message["areas"].items():
+        if not isinstance(area, dict):
+            return f"areas.{key}: expected an object"
+        if "id" in area and str(area["id"]) != str(key):
+            return f"areas.{key}: its 'id' is {area['id']!r}"
+    return None
+
+
+CONCEPT_AREA = obj(
+    {},
+    {
+        "id": _AREA_ID,
+        "class": string(max_length=64, nullable=True, description="room, corridor, hallway (or None)"),
+        "types": array(string(max_length=200), description="ontology classes, most specific first"),
+        "names": array(_WORDS, description="what people called it"),
+        "objects": array(_OBJECT_REF),
+        "asserted": Spec("any", description="what people said (types, names, by speaker)"),
+        "inferred": Spec("any", description="what the reasoner inferred"),
+    },
+    description="an area of the conceptual map (keys as in a loci.say/1 AREA)",
+)
+
+CONCEPTS = MessageSchema(
+    "loci.concepts",
+    1,
+    obj(
+        {
+            "areas": mapping(CONCEPT_AREA, description="area id (a string) → the area"),
+            "objects": mapping(
+                Spec("any", nullable=True), description="object name → {name, kind, area, node, ...}"
+            ),
+        },
+        {"version": integer(minimum=0), "stamp": _STAMP},
+    ),
+    checks=(_concepts_checks,),
+    description="the conceptual map: areas with their classes, types, names and objects",
+)
+
+for _schema in (PEOPLE, OBJECTS, CONCEPTS):
     SCHEMAS.register(_schema)

@@ -44,7 +44,7 @@ BENCHMARKS: list[tuple[str, str, list[str], str]] = [
 ]
 
 #: benchmarks whose --json takes a file (the others print JSON with --json)
-JSON_FILE = {"raycast", "features", "labeling", "boosting", "topology"}
+JSON_FILE = {"raycast", "features", "labeling", "boosting", "topology", "agent"}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -55,7 +55,6 @@ def main(argv: list[str] | None = None) -> int:
     outdir = args.out / "bench"
     outdir.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ, NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-    sections: list[str] = []
     failed: list[str] = []
     for name, module, extra, what in BENCHMARKS:
         if args.only and name not in args.only:
@@ -65,6 +64,7 @@ def main(argv: list[str] | None = None) -> int:
         if name in JSON_FILE:
             cmd += ["--json", str(json_path)]
         print(f"[bench] {name}: {what} ...", file=sys.stderr, flush=True)
+        load = os.getloadavg()[0]
         t0 = time.perf_counter()
         proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
         seconds = time.perf_counter() - t0
@@ -79,14 +79,30 @@ def main(argv: list[str] | None = None) -> int:
                 if js.returncode == 0:
                     atomic_write_text(json_path, js.stdout)
         shown = " ".join(["python -m", module, *extra])
-        sections += [f"## {name}: {what}", "", f"`{shown}` ({seconds:.0f} s)", "", "```", report, "```", ""]
+        when = datetime.now(UTC).date().isoformat()
+        section = [
+            f"## {name}: {what}",
+            "",
+            f"`{shown}` ({seconds:.0f} s, {when}, load {load:.1f} at start)",
+            "",
+            "```",
+            report,
+            "```",
+            "",
+        ]
+        atomic_write_text(outdir / f"{name}.md", "\n".join(section))
+    # bench.md collects every benchmark's latest section, so `--only X` refreshes X alone
+    sections: list[str] = []
+    for name, *_ in BENCHMARKS:
+        part = outdir / f"{name}.md"
+        sections += [part.read_text(encoding="utf-8")] if part.exists() else [f"## {name}: not run yet", ""]
     head = [
         "# Benchmarks",
         "",
         "Made by `make bench` (`python -m agent.tools.bench`), one benchmark per process, one after "
         "the other, numba and BLAS limited to one thread.",
         f"Machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}; "
-        f"{datetime.now(UTC).date().isoformat()}. Speeds are ratios against baselines run in the same "
+        "each section says when it ran. Speeds are ratios against baselines run in the same "
         "process; absolute times depend on the machine and on what else runs on it.",
         "",
     ]

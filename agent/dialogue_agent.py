@@ -1,0 +1,962 @@
+"""The agent's side of the dialogue (Sect. 7.4): intents in, replies, questions and base goals out.
+
+:class:`DialogueAgent` holds no socket: it reads the pipeline's map (``graph``, ``areas``)
+and a concepts store, and every method returns the messages to publish as
+:class:`Outgoing` ``(stream, message)`` pairs, so it is tested without a bus.
+:func:`run_dialogue` is the thin bus task around it (in :mod:`agent.runtime`).
+
+Every ``loci.intent/1`` gets exactly one ``loci.say/1`` with ``in_reply_to`` = its id
+(status ``ok``, ``accepted`` for a task that goes on, or ``error`` with a ``reason``). Tasks
+report later with ``task`` = the intent's id: ``go_to`` when the base says the goal was
+reached or failed, ``look_around`` when the turn is over, ``follow_me`` when the person is
+lost. Contents (``docs/agent.md``):
+
+- ``ask_place`` → ``{"area": AREA}``; ``ask_where`` → ``{"target", "area": AREA|None, "node"}``;
+- ``assert_type``/``assert_name``/``assert_object`` → ``{"area": AREA}`` (and ``"object"``),
+  asserted on the current area (an object: at the current node);
+- ``go_to`` → ``{"target", "node", "path", "distance"}``, a ``loci.base_goal/1`` with the
+  path's waypoints; later ``{"reached": bool, "node"}``;
+- ``look_around`` → accepted, the base turns once (``base/cmd``); camera recognitions
+  (:meth:`DialogueAgent.on_detections`) become objects of the current area and node; the
+  report is ``{"objects": [{"name", "kind"}], "area": AREA}``;
+- ``follow_me`` → accepted; each scan goes through people detection and follow-me
+  (:meth:`DialogueAgent.on_scan`) to goals on ``base/goal``; ``stop`` cancels everything;
+- ``answer`` → the open question (``loci.ask/1``).
+
+AREA is ``{"id", "class", "types", "names", "objects", "current"}`` (the pipeline's class,
+the concepts' types, names and objects). Targets are resolved against the concepts
+snapshot: an object by name or kind ("the television") → the node it was last seen from;
+an area by a name, a type or the class, optionally "with" objects → a node of that area
+(:func:`~knowledge.navigation.planning.goal_in_area`), the nearest by path when several fit.
+
+After every change of the map (:meth:`DialogueAgent.tick`), false doorways
+(:func:`~knowledge.navigation.consistency.false_doorways`) are looked for; a new one is
+asked about ("Was there a door here?", choices yes/no, ``about`` = the finding). "no"
+removes the doorway node (the areas are recomputed, their events go to the concepts);
+"yes" keeps it and it is never asked about again.
+
+Without the conceptual service (:mod:`agent.conceptual_service`, on with ``[conceptual]``)
+:class:`MemoryConcepts` keeps what was said and seen in memory, without reasoning.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import inspect
+import json
+import logging
+import math
+import re
+import time
+from collections.abc import Awaitable, Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol, TypeVar
+
+from agent.bus.bridge import BusClosed
+from agent.dialogue.referring import answer_text, describe_target, kind_words
+from knowledge.errors import LociError, ProtocolError
+from knowledge.navigation.consistency import FalseDoorway, false_doorways, remove_doorway
+from knowledge.navigation.graph import PLACE, NavigationGraph
+from knowledge.navigation.planning import goal_in_area, plan, start_node
+from knowledge.topology.areas import (
+    AreaClassChanged,
+    AreaCreated,
+    AreaEvent,
+    AreaMap,
+    AreaRemoved,
+    AreasMerged,
+)
+
+log = logging.getLogger(__name__)
+T = TypeVar("T")
+
+#: Classes an AREA's ``class`` may take (others, e.g. "doorway", are None).
+AREA_CLASSES = ("room", "corridor", "hallway")
+#: Turn rate of "look around", rad/s (a full turn takes 2π / this).
+LOOK_OMEGA = 0.6
+YES = frozenset({"yes", "y", "yeah", "yep", "yes there was", "there was", "correct", "right"})
+NO = frozenset({"no", "n", "nope", "no there was not", "there was not", "there wasn't", "wrong"})
+_ARTICLE = re.compile(r"^(the|a|an|this|that)\s+", re.IGNORECASE)
+
+
+@dataclass(frozen=True)
+class Outgoing:
+    """A message to publish: ``stream`` is the key suffix (``"dialogue/say"``, ``"base/goal"``...)."""
+
+    stream: str
+    message: dict[str, Any]
+
+
+class MapState(Protocol):
+    """What the dialogue reads of the map (the :class:`~agent.pipeline.Pipeline` is one)."""
+
+    graph: NavigationGraph
+    areas: AreaMap
+
+
+class Concepts(Protocol):
+    """The conceptual service's interface the dialogue uses (``agent.conceptual_service``)."""
+
+    def snapshot(self) -> dict[str, Any]: ...
+
+    def submit(self, fn: Callable[[Any], T]) -> Awaitable[T]: ...
+
+    def request_reasoning(self) -> Any: ...
+
+    def apply_area_events(self, events: Sequence[AreaEvent], labels: Mapping[int, str | None]) -> Any: ...
+
+
+# ---------------------------------------------------------------------------- memory concepts
+
+
+def class_of_words(words: str) -> str:
+    """Words as an ontology-like class name: "charging station" → "ChargingStation"."""
+    return "".join(w[:1].upper() + w[1:] for w in re.split(r"[\s_\-]+", words.strip()) if w)
+
+
+class MemoryConcepts:
+    """The concepts the dialogue needs, kept in memory without reasoning (no Java).
+
+    It offers both :class:`Concepts` (``submit`` runs the function at once) and the part of
+    ``knowledge.conceptual.ConceptualMap`` the dialogue calls (``set_area``, ``merge_areas``,
+    ``add_object``, ``assert_type``, ``assert_name``...). An asserted type becomes the
+    area's only type ("kitchen" → ``["Kitchen"]``); nothing is inferred.
+    """
+
+    def __init__(self) -> None:
+        self.areas: dict[int, dict[str, Any]] = {}
+        self.objects: dict[str, dict[str, Any]] = {}
+        self.version = 0
+
+    # ---- the service's side
+    def snapshot(self) -> dict[str, Any]:
+        areas: dict[str, Any] = {}
+        for aid, a in sorted(self.areas.items()):
+            objs = [
+                {"name": o["name"], "kind": o["kind"]}
+                for o in sorted(self.objects.values(), key=lambda o: o["name"])
+                if o["area"] == aid
+            ]
+            types = [a["type"]] if a.get("type") else []
+            areas[str(aid)] = {
+                "id": aid,
+                "class": a.get("class"),
+                "types": types,
+                "names": list(a.get("names", [])),
+                "objects": objs,
+                "asserted": {"types": dict(a.get("asserted_types", {})), "names": dict(a.get("by", {}))},
+                "inferred": [],
+            }
+        return {
+            "areas": areas,
+            "objects": {k: dict(v) for k, v in sorted(self.objects.items())},
+            "version": self.version,
+        }
+
+    def submit(self, fn: Callable[[Any], T]) -> Awaitable[T]:
+        fut: asyncio.Future[T] = asyncio.get_running_loop().create_future()
+        try:
+            fut.set_result(fn(self))
+        except Exception as exc:
+            fut.set_exception(exc)
+        return fut
+
+    def request_reasoning(self) -> None:
+        return None
+
+    def apply_area_events(self, events: Sequence[AreaEvent], labels: Mapping[int, str | None]) -> None:
+        for e in events:
+            if isinstance(e, AreasMerged):
+                for gone in e.absorbed:
+                    self.merge_areas(e.area_id, gone)
+            elif isinstance(e, AreaCreated):
+                self.set_area(e.area_id, labels.get(e.area_id, e.label))
+            elif isinstance(e, AreaClassChanged):
+                self.set_area(e.area_id, e.new)
+            elif isinstance(e, AreaRemoved) and e.cause != "merged":
+                self.remove_area(e.area_id)
+
+    # ---- the map's side
+    def _area(self, area: int) -> dict[str, Any]:
+        return self.areas.setdefault(int(area), {"class": None, "names": []})
+
+    def set_area(self, area: int, cls: str | None) -> None:
+        self._area(area)["class"] = cls if cls in AREA_CLASSES else None
+        self.version += 1
+
+    def remove_area(self, area: int) -> None:
+        self.areas.pop(int(area), None)
+        for name in [n for n, o in self.objects.items() if o["area"] == area]:
+            del self.objects[name]
+        self.version += 1
+
+    def merge_areas(self, keep: int, gone: int) -> None:
+        a, b = self._area(keep), self.areas.pop(int(gone), {})
+        for n in b.get("names", []):
+            if n not in a["names"]:
+                a["names"].append(n)
+        if not a.get("type") and b.get("type"):
+            a["type"] = b["type"]
+        for o in self.objects.values():
+            if o["area"] == gone:
+                o["area"] = keep
+        self.version += 1
+
+    def add_object(
+        self, name: str, kind: str, area: int, node: int | None, *, source: str = "camera"
+    ) -> None:
+        self._area(area)
+        self.objects[name] = {"name": name, "kind": kind, "area": int(area), "node": node, "source": source}
+        self.version += 1
+
+    def remove_object(self, name: str) -> None:
+        self.objects.pop(name, None)
+        self.version += 1
+
+    def assert_type(self, area: int, word: str, speaker: str) -> None:
+        a = self._area(area)
+        w = " ".join(word.lower().split())
+        if w in AREA_CLASSES:
+            a["class"] = w
+        else:
+            a["type"] = class_of_words(w)
+        a.setdefault("asserted_types", {})[speaker] = w
+        self.version += 1
+
+    def assert_name(self, area: int, name: str, speaker: str) -> None:
+        a = self._area(area)
+        n = " ".join(name.split())
+        if n not in a["names"]:
+            a["names"].append(n)
+        a.setdefault("by", {}).setdefault(speaker, [])
+        if n not in a["by"][speaker]:
+            a["by"][speaker].append(n)
+        self.version += 1
+
+
+# ---------------------------------------------------------------------------- the dialogue
+
+
+def _norm(words: str) -> str:
+    w = " ".join(words.lower().replace("_", " ").split())
+    return _ARTICLE.sub("", w)
+
+
+def _kind_matches(words: str, kind: str | None) -> bool:
+    if not kind:
+        return False
+    return words in (kind_words(kind), kind.lower()) or words.replace(" ", "") == kind.lower()
+
+
+@dataclass
+class _Resolved:
+    """A target resolved: an object (``node`` it was seen from) or candidate areas."""
+
+    kind: str  # "object" | "area"
+    areas: list[int]
+    node: int | None = None
+    name: str | None = None
+
+
+@dataclass
+class _Task:
+    intent: str
+    kind: str
+    speaker: str | None
+    target: Any = None
+    node: int | None = None
+
+
+@dataclass
+class _Question:
+    id: str
+    about: dict[str, Any]
+    node: int
+
+
+@dataclass
+class _Look:
+    intent: str
+    speaker: str | None
+    until: float
+    seen: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+
+class DialogueAgent:
+    """The agent's dialogue (see the module docstring).
+
+    Args:
+        world: the map (``graph``, ``areas``): the running pipeline.
+        concepts: the conceptual service (default: a :class:`MemoryConcepts`).
+        can_recognise: whether camera recognitions will come (look_around needs them).
+        follow_factory: makes a follow-me controller (``agent.follow.FollowMe``); None:
+            import ``agent.follow`` when asked (an error reply if it is not there).
+        people_factory: makes the people pipeline (default: ``PeoplePipeline()``).
+        on_map_changed: called after the dialogue changed the map (a doorway removed).
+        clock: seconds since the epoch.
+    """
+
+    def __init__(
+        self,
+        world: MapState,
+        concepts: Concepts | None = None,
+        *,
+        can_recognise: bool = False,
+        follow_factory: Callable[[], Any] | None = None,
+        people_factory: Callable[[], Any] | None = None,
+        on_map_changed: Callable[[], None] | None = None,
+        clock: Callable[[], float] = time.time,
+    ) -> None:
+        self.world = world
+        self.concepts: Concepts = concepts if concepts is not None else MemoryConcepts()
+        self.can_recognise = can_recognise
+        self._follow_factory = follow_factory
+        self._people_factory = people_factory
+        self._on_map_changed = on_map_changed
+        self.clock = clock
+        self.pose: tuple[float, float, float] | None = None
+        self.tasks: dict[str, _Task] = {}  # base goal id -> task
+        self.questions: dict[str, _Question] = {}
+        self.confirmed: set[int] = set()  # doorways the tutor confirmed
+        self.asked: set[int] = set()
+        self.look: _Look | None = None
+        self.follow: Any = None
+        self._follow_task: _Task | None = None
+        self._people: Any = None
+        self._pending_events: list[AreaEvent] = []
+        self._checked_revision = -1
+        self._seq = 0
+        self.replies = 0
+        self.invalid = 0
+
+    # ------------------------------------------------------------------ ids, messages
+    def _next(self, prefix: str) -> str:
+        self._seq += 1
+        return f"{prefix}-{self._seq}"
+
+    def say(
+        self,
+        intent: Mapping[str, Any] | None,
+        kind: str | None,
+        status: str = "ok",
+        content: Mapping[str, Any] | None = None,
+        *,
+        text: str | None = None,
+        reason: str | None = None,
+        task: str | None = None,
+    ) -> Outgoing:
+        """A ``loci.say/1``: a reply to ``intent`` (None: a report on ``task`` or a remark)."""
+        body = dict(content or {})
+        words = text or (answer_text(kind, body) if kind and status != "error" else "") or reason or "OK."
+        msg: dict[str, Any] = {"schema": "loci.say/1", "stamp": self.clock(), "text": words, "status": status}
+        if intent is not None:
+            msg["in_reply_to"] = intent.get("id")
+            if isinstance(intent.get("speaker"), str):
+                msg["to"] = intent["speaker"]
+        if kind:
+            msg["intent"] = kind
+        if reason:
+            msg["reason"] = reason
+        if task:
+            msg["task"] = task
+        msg["content"] = body
+        return Outgoing("dialogue/say", msg)
+
+    def error_for_raw(self, payload: bytes, reason: str) -> Outgoing | None:
+        """The error reply to a malformed intent that carries an id (None: it has none)."""
+        self.invalid += 1
+        try:
+            doc = json.loads(payload)
+        except (UnicodeDecodeError, ValueError):
+            return None
+        if not isinstance(doc, dict) or not isinstance(doc.get("id"), str) or len(doc["id"]) > 128:
+            return None
+        kind = doc.get("intent") if isinstance(doc.get("intent"), str) else None
+        fake = {"id": doc["id"], "speaker": doc.get("speaker")}
+        self.replies += 1
+        return self.say(
+            fake,
+            kind if kind and len(kind) <= 64 else None,
+            "error",
+            text="I did not understand that.",
+            reason=reason,
+        )
+
+    # ------------------------------------------------------------------ the map
+    @property
+    def graph(self) -> NavigationGraph:
+        return self.world.graph
+
+    @property
+    def areas(self) -> AreaMap:
+        return self.world.areas
+
+    def current_node(self) -> int | None:
+        """The place node the robot is at: the graph's current node, or the nearest place node."""
+        g = self.graph
+        cur = g.current
+        if cur is not None and cur in g and g.node(cur).kind == PLACE:
+            return cur
+        xy = (
+            self.pose[:2]
+            if self.pose is not None
+            else (g.node(cur).xy if cur is not None and cur in g else None)
+        )
+        if xy is None:
+            return None
+        near = g.nearest(xy, kind=PLACE)
+        return near[0] if near is not None else None
+
+    def current_area(self) -> int | None:
+        node = self.current_node()
+        area = self.areas.area_of(node) if node is not None else None
+        return area.id if area is not None else None
+
+    def _snapshot(self) -> dict[str, Any]:
+        try:
+            snap = self.concepts.snapshot()
+        except Exception:  # the service may not have reasoned yet
+            log.exception("the concepts snapshot failed")
+            return {"areas": {}, "objects": {}}
+        return snap if isinstance(snap, dict) else {"areas": {}, "objects": {}}
+
+    @staticmethod
+    def _objects(snap: Mapping[str, Any]) -> list[dict[str, Any]]:
+        """The snapshot's objects as ``{"name", "kind", "area", "node", ...}`` (a map by name or a list)."""
+        objs = snap.get("objects") or {}
+        pairs = (
+            objs.items()
+            if isinstance(objs, Mapping)
+            else ((None, o) for o in objs)
+            if isinstance(objs, list)
+            else ()
+        )
+        return [{**o, "name": o.get("name", name)} for name, o in pairs if isinstance(o, Mapping)]
+
+    @staticmethod
+    def _snap_area(snap: Mapping[str, Any], aid: int) -> Mapping[str, Any]:
+        areas = snap.get("areas") or {}
+        if not isinstance(areas, Mapping):
+            return {}
+        a = areas.get(str(aid), areas.get(aid))
+        return a if isinstance(a, Mapping) else {}
+
+    def area_view(
+        self,
+        aid: int | None,
+        snap: Mapping[str, Any] | None = None,
+        extra_objects: Iterable[Mapping[str, Any]] = (),
+    ) -> dict[str, Any] | None:
+        """The AREA of an area id (None: None)."""
+        if aid is None:
+            return None
+        snap = self._snapshot() if snap is None else snap
+        sa = self._snap_area(snap, aid)
+        area = self.areas.areas.get(aid)
+        label = area.label if area is not None else None
+        cls = label if label in AREA_CLASSES else sa.get("class") if sa.get("class") in AREA_CLASSES else None
+        objects: list[dict[str, Any]] = []
+        seen: set[str] = set()
+        for o in [
+            *(sa.get("objects") or []),
+            *[o for o in self._objects(snap) if o.get("area") == aid],
+            *extra_objects,
+        ]:
+            if isinstance(o, Mapping) and isinstance(o.get("name"), str) and o["name"] not in seen:
+                seen.add(o["name"])
+                objects.append({"name": o["name"], "kind": o.get("kind")})
+        return {
+            "id": int(aid),
+            "class": cls,
+            "types": [t for t in sa.get("types") or [] if isinstance(t, str)],
+            "names": [n for n in sa.get("names") or [] if isinstance(n, str)],
+            "objects": objects,
+            "current": aid == self.current_area(),
+        }
+
+    # ------------------------------------------------------------------ targets
+    def resolve(self, target: Mapping[str, Any], snap: Mapping[str, Any]) -> _Resolved | None:
+        """An object (by name or kind) or the areas a target names (by name, type, class, objects)."""
+        head = _norm(str(target.get("head", "")))
+        with_ = [_norm(w) for w in target.get("with") or [] if isinstance(w, str)]
+        if not head:
+            return None
+        objs = [
+            o
+            for o in self._objects(snap)
+            if _norm(str(o.get("name", ""))) == head or _kind_matches(head, o.get("kind"))
+        ]
+        if objs and not with_:
+            start = self._start()
+            best = None
+            for o in objs:
+                node = o.get("node")
+                if not isinstance(node, int) or node not in self.graph:
+                    continue
+                p = plan(self.graph, start, node) if start is not None else None
+                d = p.distance if p is not None else math.inf
+                if best is None or d < best[0]:
+                    best = (d, o)
+            o = best[1] if best is not None else objs[0]
+            area = o.get("area")
+            return _Resolved("object", [area] if isinstance(area, int) else [], o.get("node"), o.get("name"))
+        found: list[int] = []
+        for aid in self.areas.areas:
+            view = self.area_view(aid, snap)
+            assert view is not None
+            names = [_norm(n) for n in view["names"]]
+            types = [kind_words(t) for t in view["types"]]
+            fits = head in names or head in types or head == view["class"] or head in ("place", "area")
+            if fits and with_:
+                have = [(_norm(o["name"]), o.get("kind")) for o in view["objects"]]
+                fits = all(any(w == n or _kind_matches(w, k) for n, k in have) for w in with_)
+            if fits:
+                found.append(aid)
+        if not found:
+            return None
+        return _Resolved("area", sorted(found))
+
+    def _start(self) -> int | None:
+        return start_node(self.graph, self.pose[:2] if self.pose is not None else None)
+
+    # ------------------------------------------------------------------ intents
+    async def handle(self, intent: Mapping[str, Any]) -> list[Outgoing]:
+        """The messages answering one (valid) ``loci.intent/1``: exactly one reply on
+        ``dialogue/say``, plus base goals and the like."""
+        kind = str(intent.get("intent"))
+        args = intent.get("args") or {}
+        handler = getattr(self, f"_on_{kind}", None)
+        self.replies += 1
+        if handler is None:
+            return [self.say(intent, kind, "error", reason=f"I cannot {kind.replace('_', ' ')} yet.")]
+        try:
+            out: list[Outgoing] = await handler(intent, args)
+        except (LociError, ValueError, KeyError) as exc:
+            log.info("intent %s (%s) refused: %s", intent.get("id"), kind, exc)
+            return [self.say(intent, kind, "error", reason=str(exc).strip("'\""))]
+        except Exception as exc:
+            log.exception("intent %s (%s) failed", intent.get("id"), kind)
+            return [self.say(intent, kind, "error", reason=f"something went wrong: {exc}")]
+        return out
+
+    def _here(self) -> tuple[int, int]:
+        node, area = self.current_node(), self.current_area()
+        if node is None or area is None:
+            raise LociError("I do not know where I am yet; let me drive a little first.")
+        return node, area
+
+    async def _tell(self, fn: Callable[[Any], Any]) -> None:
+        await self.concepts.submit(fn)
+        self.concepts.request_reasoning()
+
+    async def _on_ask_place(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:
+        area = self.area_view(self.current_area())
+        return [self.say(intent, "ask_place", "ok", {"area": area})]
+
+    async def _on_ask_where(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:
+        target = dict(args["target"])
+        snap = self._snapshot()
+        res = self.resolve(target, snap)
+        content: dict[str, Any] = {"target": target, "area": None, "node": None}
+        if res is not None and res.kind == "object":
+            content["area"] = self.area_view(res.areas[0], snap) if res.areas else None
+            content["node"] = res.node
+        elif res is not None:
+            start = self._start()
+            best = self._nearest_area(res.areas, start) if start is not None else None
+            aid = best[0] if best is not None else res.areas[0]
+            content["area"] = self.area_view(aid, snap)
+        return [self.say(intent, "ask_where", "ok", content)]
+
+    async def _on_assert_type(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:
+        _, area = self._here()
+        word, speaker = str(args["type"]), str(intent.get("speaker", "tutor"))
+        await self._tell(lambda m: m.assert_type(area, word, speaker))
+        return [self.say(intent, "assert_type", "ok", {"area": self.area_view(area)})]
+
+    async def _on_assert_name(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:
+        _, area = self._here()
+        name, speaker = str(args["name"]), str(intent.get("speaker", "tutor"))
+        await self._tell(lambda m: m.assert_name(area, name, speaker))
+        return [self.say(intent, "assert_name", "ok", {"area": self.area_view(area)})]
+
+    async def _on_assert_object(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:
+        node, area = self._here()
+        name = _norm(str(args["object"]))
+        kind = class_of_words(name)
+        await self._tell(lambda m: m.add_object(name, kind, area, node, source="tutor"))
+        obj = {"name": name, "kind": kind}
+        view = self.area_view(area, extra_objects=[obj])
+        return [self.say(intent, "assert_object", "ok", {"object": obj, "area": view, "node": node})]
+
+    def _nearest_area(self, areas: Sequence[int], start: int) -> tuple[int, int, float] | None:
+        """Of candidate areas, ``(area, goal node, metres)`` with the shortest path from ``start``."""
+        best: tuple[int, int, float] | None = None
+        for aid in areas:
+            a = self.areas.areas.get(aid)
+            if a is None:
+                continue
+            goal = goal_in_area(self.graph, start, a.nodes)
+            p = plan(self.graph, start, goal) if goal is not None else None
+            if p is not None and (best is None or p.distance < best[2]):
+                best = (aid, p.goal, p.distance)
+        return best
+
+    async def _on_go_to(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:
+        target = dict(args["target"])
+        what = describe_target(target)
+        res = self.resolve(target, self._snapshot())
+        if res is None:
+            raise LociError(f"I do not know where {what} is.")
+        start = self._start()
+        if start is None:
+            raise LociError("I do not know where I am yet; let me drive a little first.")
+        goal: int | None = res.node if res.kind == "object" and res.node in self.graph else None
+        if goal is None:
+            best = self._nearest_area(res.areas, start)
+            goal = best[1] if best is not None else None
+        p = plan(self.graph, start, goal) if goal is not None else None
+        if p is None:
+            raise LociError(f"I cannot find a way to {what} from here.")
+        points = list(p.waypoints)
+        if len(points) > 1 and self.pose is not None:
+            x0, y0 = points[0]
+            if math.hypot(x0 - self.pose[0], y0 - self.pose[1]) <= self.graph.params.reach_radius:
+                points = points[1:]
+        goal_id = f"goto-{intent['id']}"
+        self._cancel_follow()
+        self.tasks = {k: t for k, t in self.tasks.items() if t.kind != "go_to"}
+        self.tasks[goal_id] = _Task(str(intent["id"]), "go_to", intent.get("speaker"), target, p.goal)
+        goal_msg = {
+            "schema": "loci.base_goal/1",
+            "id": goal_id,
+            "stamp": self.clock(),
+            "frame_id": "odom",
+            "path": [{"x": round(x, 4), "y": round(y, 4)} for x, y in points],
+        }
+        content = {"target": target, "node": p.goal, "path": list(p.nodes), "distance": round(p.distance, 3)}
+        return [self.say(intent, "go_to", "accepted", content), Outgoing("base/goal", goal_msg)]
+
+    async def _on_stop(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:
+        stopped = sorted(
+            {t.kind for t in self.tasks.values()}
+            | ({"follow_me"} if self.follow else set())
+            | ({"look_around"} if self.look else set())
+        )
+        self.tasks.clear()
+        self._cancel_follow()
+        out = [self.say(intent, "stop", "ok", {"stopped": stopped})]
+        if self.look is not None:
+            self.look = None
+            out.append(self._twist(0.0))
+        out.append(
+            Outgoing("base/goal", {"schema": "loci.base_goal/1", "stamp": self.clock(), "cancel": True})
+        )
+        return out
+
+    async def _on_follow_me(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:
+        if self._follow_factory is None:
+            try:
+                from agent.follow import FollowMe
+            except ImportError as exc:
+                raise LociError("I cannot follow people: follow-me is not installed (agent.follow).") from exc
+            self._follow_factory = FollowMe
+        if self._people is None:
+            if self._people_factory is None:
+                from knowledge.people.pipeline import PeoplePipeline
+
+                self._people_factory = PeoplePipeline
+            self._people = self._people_factory()
+        self.tasks = {k: t for k, t in self.tasks.items() if t.kind != "go_to"}
+        self.look = None
+        self.follow = self._follow_factory()
+        self.follow.start(self.clock())
+        self._follow_task = _Task(str(intent["id"]), "follow_me", intent.get("speaker"))
+        return [self.say(intent, "follow_me", "accepted", {"following": True})]
+
+    def _cancel_follow(self) -> None:
+        if self.follow is not None:
+            with contextlib.suppress(Exception):
+                self.follow.stop()
+        self.follow = None
+        self._follow_task = None
+
+    async def _on_look_around(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:
+        if not self.can_recognise:
+            raise LociError(
+                "I cannot recognise objects: there is no object database (teach me with 'loci objects add')."
+            )
+        self._here()
+        self._cancel_follow()
+        self.look = _Look(str(intent["id"]), intent.get("speaker"), self.clock() + 2 * math.pi / LOOK_OMEGA)
+        return [
+            self.say(intent, "look_around", "accepted", {}, text="I am looking around."),
+            self._twist(LOOK_OMEGA),
+        ]
+
+    def _twist(self, omega: float) -> Outgoing:
+        return Outgoing(
+            "base/cmd", {"schema": "loci.twist/1", "stamp": self.clock(), "v": 0.0, "omega": omega}
+        )
+
+    async def _on_answer(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:
+        qid = args.get("question")
+        if qid is None and self.questions:
+            qid = next(reversed(self.questions))
+        q = self.questions.get(qid) if isinstance(qid, str) else None
+        if q is None:
+            raise LociError("I did not ask anything." if not self.questions else f"I did not ask {qid!r}.")
+        answer = _norm(str(args["answer"])).strip(".!")
+        content: dict[str, Any] = {"question": q.id, "answer": answer}
+        if answer in YES:
+            del self.questions[q.id]
+            self.confirmed.add(q.node)
+            return [self.say(intent, "answer", "ok", content, text="Thank you, I keep the door.")]
+        if answer not in NO:
+            raise LociError("Please answer yes or no.")
+        del self.questions[q.id]
+        out: list[Outgoing] = []
+        if q.node in self.graph and self.graph.node(q.node).kind != PLACE:
+            events = remove_doorway(self.graph, self.areas, q.node)
+            self._pending_events.extend(events)
+            content["removed"] = q.node
+            content["merged"] = [[e.area_id, *e.absorbed] for e in events if isinstance(e, AreasMerged)]
+            if self._on_map_changed is not None:
+                self._on_map_changed()
+        content["area"] = self.area_view(self.current_area())
+        out.append(
+            self.say(intent, "answer", "ok", content, text="Thank you, I removed the door from my map.")
+        )
+        return out
+
+    # ------------------------------------------------------------------ events from the robot
+    def on_area_events(self, events: Sequence[AreaEvent]) -> None:
+        """The pipeline's area events (queued; :meth:`tick` hands them to the concepts)."""
+        self._pending_events.extend(events)
+
+    def on_base_status(self, status: Mapping[str, Any]) -> list[Outgoing]:
+        """A ``loci.base_status/1``: a go-to task reached or failed → its report."""
+        goal = status.get("goal")
+        state = status.get("status")
+        if not isinstance(goal, str) or goal not in self.tasks:
+            return []
+        if state not in ("reached", "failed", "collided", "cancelled"):
+            return []
+        task = self.tasks.pop(goal)
+        content = {"target": task.target, "reached": state == "reached", "node": task.node}
+        if state == "reached":
+            return [self.say(None, task.kind, "ok", content, task=task.intent)]
+        reason = status.get("reason") or f"the base says {state}"
+        text = f"I could not get to {describe_target(task.target)}: {reason}."
+        return [self.say(None, task.kind, "error", content, text=text, reason=str(reason), task=task.intent)]
+
+    def on_pose(self, pose: tuple[float, float, float]) -> None:
+        self.pose = pose
+
+    def on_scan(self, scan: Any, pose: tuple[float, float, float]) -> list[Outgoing]:
+        """One processed scan and the laser's odometry pose: people and follow-me goals while following."""
+        self.pose = pose
+        if self.follow is None or self._people is None:
+            return []
+        frame = self._people.process_scan(scan, sensor_pose=pose)
+        people = frame.to_json("odom")
+        out = [Outgoing("people", people)]
+        step = self.follow.update(frame, pose, float(scan.stamp))
+        task = self._follow_task.intent if self._follow_task is not None else None
+        message = getattr(step, "message", None)
+        if message:
+            out.append(self.say(None, "follow_me", "ok", {"state": step.state}, text=message, task=task))
+        if getattr(step, "cancel", False):
+            out.append(
+                Outgoing("base/goal", {"schema": "loci.base_goal/1", "stamp": self.clock(), "cancel": True})
+            )
+        if step.goal is not None:
+            gx, gy, gth = (float(v) for v in step.goal)
+            goal = {"x": gx, "y": gy, "theta": gth}
+            msg = {
+                "schema": "loci.base_goal/1",
+                "id": self._next("follow"),
+                "stamp": self.clock(),
+                "frame_id": "odom",
+                "goal": goal,
+            }
+            out.append(Outgoing("base/goal", msg))
+        return out
+
+    @property
+    def looking(self) -> bool:
+        """Whether camera frames should be recognised now."""
+        return self.look is not None
+
+    async def on_detections(self, detections: Sequence[Any], stamp: float) -> list[Outgoing]:
+        """Recognised objects (``name``, ``kind``, ``score``...) in a frame taken at ``stamp``:
+        objects of the current area at the current node, published on ``objects``."""
+        node, area = self.current_node(), self.current_area()
+        recs = []
+        for d in detections:
+            name = str(getattr(d, "name", ""))
+            if not name:
+                continue
+            kind = getattr(d, "kind", None) or class_of_words(name)
+            rec: dict[str, Any] = {
+                "name": name,
+                "kind": kind,
+                "score": float(getattr(d, "score", 0.0)),
+                "node": node,
+                "area": area,
+            }
+            inliers = getattr(d, "inliers", None)
+            if isinstance(inliers, int) and not isinstance(inliers, bool):
+                rec["inliers"] = inliers
+            recs.append(rec)
+            if area is not None:
+                await self._tell(_adder(name, str(kind), area, node))
+            if self.look is not None:
+                self.look.seen[name] = {"name": name, "kind": kind}
+        if not recs:
+            return []
+        return [
+            Outgoing(
+                "objects",
+                {"schema": "loci.objects/1", "stamp": stamp, "frame_id": "camera", "recognitions": recs},
+            )
+        ]
+
+    # ------------------------------------------------------------------ periodic
+    async def tick(self) -> list[Outgoing]:
+        """Hand queued area events to the concepts, end a finished look-around, and ask about
+        false doorways after a map change."""
+        out: list[Outgoing] = []
+        if self._pending_events:
+            events, self._pending_events = self._pending_events, []
+            result = self.concepts.apply_area_events(events, self.areas.labels())
+            if inspect.isawaitable(result):
+                await result
+        now = self.clock()
+        if self.look is not None:
+            if now >= self.look.until:
+                look, self.look = self.look, None
+                objects = list(look.seen.values())
+                content = {
+                    "objects": objects,
+                    "area": self.area_view(self.current_area(), extra_objects=objects),
+                }
+                out.append(self._twist(0.0))
+                out.append(self.say(None, "look_around", "ok", content, task=look.intent))
+            else:
+                out.append(self._twist(LOOK_OMEGA))
+        out.extend(self.check_consistency())
+        return out
+
+    def check_consistency(self) -> list[Outgoing]:
+        """A ``loci.ask/1`` about the first new false doorway, if the map changed (one open question at a time)."""
+        g = self.graph
+        if g.revision == self._checked_revision:
+            return []
+        self._checked_revision = g.revision
+        if self.questions:
+            return []
+        found: list[FalseDoorway] = false_doorways(g, self.areas, ignore=self.confirmed | self.asked)
+        if not found:
+            return []
+        f = found[0]
+        self.asked.add(f.door)
+        q = _Question(self._next("q-door"), f.as_dict(), f.door)
+        self.questions[q.id] = q
+        msg = {
+            "schema": "loci.ask/1",
+            "id": q.id,
+            "stamp": self.clock(),
+            "text": "Was there a door here?",
+            "choices": ["yes", "no"],
+            "about": q.about,
+        }
+        return [Outgoing("dialogue/ask", msg)]
+
+
+def _adder(name: str, kind: str, area: int, node: int | None) -> Callable[[Any], Any]:
+    def add(m: Any) -> Any:
+        return m.add_object(name, kind, area, node, source="camera")
+
+    return add
+
+
+# ---------------------------------------------------------------------------- the bus task
+
+
+async def run_dialogue(
+    agent: DialogueAgent,
+    intents: Any,
+    statuses: Any,
+    publish: Callable[[Outgoing], None],
+    *,
+    period: float = 0.1,
+    registry: Any = None,
+    invalid: Callable[[], None] | None = None,
+) -> None:
+    """Serve the dialogue until cancelled.
+
+    Args:
+        agent: the dialogue.
+        intents: a subscription yielding raw intent payloads (``bytes``) via ``recv_batch``.
+        statuses: a subscription yielding decoded ``loci.base_status/1`` dicts, or None.
+        publish: publishes an :class:`Outgoing` (validates it).
+        period: seconds between :meth:`DialogueAgent.tick` calls.
+        registry: the schema registry (default ``agent.bus.schemas.SCHEMAS``).
+        invalid: called for each malformed intent (the runtime counts it).
+    """
+    if registry is None:
+        from agent.bus.schemas import SCHEMAS
+
+        registry = SCHEMAS
+
+    def send(out: Iterable[Outgoing]) -> None:
+        for o in out:
+            try:
+                publish(o)
+            except (ProtocolError, ValueError) as exc:  # a bug: say so, keep serving
+                log.error("could not publish on %s: %s (%s)", o.stream, exc, o.message)
+
+    async def serve_intents() -> None:
+        while True:
+            for payload in await intents.recv_batch(16):
+                try:
+                    intent = registry.decode(payload, "loci.intent/1")
+                except ProtocolError as exc:
+                    log.warning("dialogue/intent: dropped an invalid intent: %s", exc)
+                    if invalid is not None:
+                        invalid()
+                    reply = agent.error_for_raw(payload, str(exc))
+                    send([reply] if reply is not None else [])
+                    continue
+                send(await agent.handle(intent))
+
+    async def serve_statuses() -> None:
+        while True:
+            for status in await statuses.recv_batch(16):
+                send(agent.on_base_status(status))
+
+    async def ticks() -> None:
+        while True:
+            await asyncio.sleep(period)
+            send(await agent.tick())
+
+    tasks = [
+        asyncio.create_task(serve_intents(), name="dialogue intents"),
+        asyncio.create_task(ticks(), name="dialogue tick"),
+    ]
+    if statuses is not None:
+        tasks.append(asyncio.create_task(serve_statuses(), name="dialogue status"))
+    try:
+        done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_EXCEPTION)
+        for t in done:
+            exc = t.exception()
+            if exc is not None and not isinstance(exc, BusClosed):
+                raise exc
+    finally:
+        for t in tasks:
+            t.cancel()
+        for t in tasks:
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await t

@@ -13,26 +13,10 @@ import asyncio
 from pathlib import Path
 from typing import Any
 
-
-def _seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = -1.0
-    if not value >= 0 or value != value or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"expected a number of seconds >= 0, got {text!r}")
-    return value
-
-
-def _positive_seconds(text: str) -> float:
-    value = _seconds(text)
-    if value == 0:
-        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
-    return value
+from agent.commands.options import add_bus_options, positive_seconds, seconds
 
 
 def register(subparsers: Any) -> None:
-    from agent.bus.session import DEFAULT_AGENT_ENDPOINT
     from agent.dialogue.process import DEFAULT_REPLY_TIMEOUT
 
     p = subparsers.add_parser(
@@ -61,21 +45,7 @@ def register(subparsers: Any) -> None:
             "below override it"
         ),
     )
-    p.add_argument(
-        "--robot", help="the robot's name, the second chunk of its keys (default: this host's name)"
-    )
-    p.add_argument(
-        "--connect",
-        metavar="ENDPOINT",
-        action="append",
-        help=f"a Zenoh endpoint to connect to, repeatable (default: {DEFAULT_AGENT_ENDPOINT}, the agent's)",
-    )
-    p.add_argument(
-        "--listen",
-        metavar="ENDPOINT",
-        action="append",
-        help="an endpoint to accept connections on, repeatable (default: tcp/127.0.0.1:0, a free port)",
-    )
+    add_bus_options(p)
     source = p.add_mutually_exclusive_group()
     source.add_argument(
         "--console", action="store_true", help="only the console: ignore loci/ROBOT/dialogue/heard"
@@ -98,7 +68,7 @@ def register(subparsers: Any) -> None:
         help="in a script, do not wait for each line's reply before the next",
     )
     p.add_argument(
-        "--pause", type=_seconds, default=0.0, metavar="S", help="seconds between script lines (default 0)"
+        "--pause", type=seconds, default=0.0, metavar="S", help="seconds between script lines (default 0)"
     )
     p.add_argument(
         "--transcript",
@@ -110,7 +80,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--voice", metavar="VOICE", help="the espeak-ng voice (e.g. en, en-us, en+f3)")
     p.add_argument(
         "--reply-timeout",
-        type=_positive_seconds,
+        type=positive_seconds,
         default=DEFAULT_REPLY_TIMEOUT,
         metavar="S",
         help=f"report an intent unanswered after S seconds (default {DEFAULT_REPLY_TIMEOUT:g})",

@@ -19,6 +19,10 @@ from typing import Any
 
 import numpy as np
 
+from agent.commands.options import fraction, integer
+
+MIN_INLIERS = integer(minimum=4, why="a homography needs 4 points")
+
 #: Environment variable naming the object database folder.
 DB_ENV = "LOCI_OBJECTS_DB"
 
@@ -35,26 +39,6 @@ def default_db_dir(env: dict[str, str] | None = None) -> Path:
     state = e.get("LOCI_STATE_DIR")
     base = Path(state) if state else default_state_dir(robot_name(e.get("LOCI_ROBOT") or None), e)
     return base / "objects"
-
-
-def _min_inliers(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if v < 4:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 4 (a homography needs 4 points), got {v}")
-    return v
-
-
-def _ratio(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number in (0, 1), got {text!r}") from None
-    if not 0 < v < 1:
-        raise argparse.ArgumentTypeError(f"expected a number in (0, 1), got {v}")
-    return v
 
 
 def register(subparsers: Any) -> None:
@@ -121,11 +105,13 @@ def register(subparsers: Any) -> None:
     rec.add_argument("images", metavar="IMAGE", nargs="+", type=Path, help="images to look at")
     rec.add_argument(
         "--min-inliers",
-        type=_min_inliers,
+        type=MIN_INLIERS,
         metavar="N",
         help="RANSAC inliers a detection needs (default: 12)",
     )
-    rec.add_argument("--ratio", type=_ratio, metavar="R", help="Lowe's ratio test threshold (default: 0.75)")
+    rec.add_argument(
+        "--ratio", type=fraction, metavar="R", help="Lowe's ratio test threshold (default: 0.75)"
+    )
     db_option(rec)
     rec.set_defaults(handler=_recognise)
 

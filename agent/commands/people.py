@@ -21,6 +21,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from agent.commands.options import positive_float, positive_int
+
 #: The repository root (agent/commands/people.py → two levels up).
 REPO = Path(__file__).resolve().parents[2]
 
@@ -29,26 +31,6 @@ def default_data_dir() -> Path:
     """``$LOCI_DATA``, else ``../shared/data`` beside the repository."""
     env = os.environ.get("LOCI_DATA")
     return Path(env) if env else REPO.parent / "shared" / "data"
-
-
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {v}")
-    return v
-
-
-def _positive_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {v}")
-    return v
 
 
 def register(subparsers: Any) -> None:
@@ -72,7 +54,7 @@ def register(subparsers: Any) -> None:
         )
         q.add_argument(
             "--max-scans",
-            type=_positive_int,
+            type=positive_int,
             metavar="N",
             help="use only the first N scans of each file of the split (quick runs)",
         )
@@ -91,7 +73,7 @@ def register(subparsers: Any) -> None:
     tr.add_argument(
         "--out", type=Path, required=True, metavar="MODEL", help="where to write the model (.npz)"
     )
-    tr.add_argument("--rounds", type=_positive_int, default=100, help="boosting rounds T (default: 100)")
+    tr.add_argument("--rounds", type=positive_int, default=100, help="boosting rounds T (default: 100)")
     tr.add_argument(
         "--motion",
         action="store_true",
@@ -104,11 +86,11 @@ def register(subparsers: Any) -> None:
         "they learn the empty space the labelled people stand in, see docs/people.md",
     )
     tr.add_argument(
-        "--jump", type=_positive_float, default=0.15, help="jump distance in metres (default: 0.15)"
+        "--jump", type=positive_float, default=0.15, help="jump distance in metres (default: 0.15)"
     )
     tr.add_argument(
         "--max-range",
-        type=_positive_float,
+        type=positive_float,
         default=5.0,
         metavar="M",
         help="the detector never calls a segment whose centroid is farther than M metres a person "

@@ -14,15 +14,7 @@ import signal
 import sys
 from typing import Any
 
-
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = -1.0
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
-    return value
+from agent.commands.options import add_bus_options, positive_seconds
 
 
 def register(subparsers: Any) -> None:
@@ -41,30 +33,13 @@ def register(subparsers: Any) -> None:
         epilog=f"Example: loci record run1.mcap --robot rosie --connect {DEFAULT_AGENT_ENDPOINT} --duration 60",
     )
     p.add_argument("output", metavar="OUT.mcap", help="the recording to write")
+    add_bus_options(p, mode=True)
     p.add_argument(
-        "--robot", help="the robot's name, the second chunk of its keys (default: this host's name)"
-    )
-    p.add_argument(
-        "--connect",
-        metavar="ENDPOINT",
-        action="append",
-        help=f"a Zenoh endpoint to connect to, repeatable (default: {DEFAULT_AGENT_ENDPOINT}, the agent's)",
-    )
-    p.add_argument(
-        "--listen",
-        metavar="ENDPOINT",
-        action="append",
-        help="an endpoint to accept connections on, repeatable (default: tcp/127.0.0.1:0, a free port)",
-    )
-    p.add_argument(
-        "--mode", choices=("peer", "client"), default="peer", help="peer (default) or client of a router"
-    )
-    p.add_argument(
-        "--duration", type=_positive, metavar="S", help="stop after S seconds (default: until Ctrl-C)"
+        "--duration", type=positive_seconds, metavar="S", help="stop after S seconds (default: until Ctrl-C)"
     )
     p.add_argument(
         "--flush",
-        type=_positive,
+        type=positive_seconds,
         default=1.0,
         metavar="S",
         help="flush to the file every S seconds (default: 1)",

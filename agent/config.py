@@ -22,7 +22,8 @@ scans wait for odometry; ``[places]`` the place model and the label window N;
 ``[local_map]``, ``[rear_beams]`` the 360° scan of a front laser (Sect. 3.5); ``[state]``
 where the graph persists; ``[record]`` an optional MCAP recording; ``[diagnostics]``;
 ``[camera]`` the camera's frames; ``[conceptual]`` the conceptual map (OWL, reasoner);
-``[objects]`` the object database of the recogniser; ``[follow]`` follow-me.
+``[objects]`` the object database of the recogniser; ``[follow]`` follow-me; ``[people]``
+people detection in every scan and the masking of their legs.
 """
 
 from __future__ import annotations
@@ -78,6 +79,7 @@ _PATH_KEYS = {
     ("record", "path"),
     ("conceptual", "state"),
     ("objects", "database"),
+    ("people", "model"),
 }
 # keys holding lists of paths, resolved the same way
 _PATH_LIST_KEYS = {("conceptual", "ontologies")}
@@ -352,6 +354,30 @@ class FollowConfig:
 
 
 @dataclass(frozen=True)
+class PeopleConfig:
+    """``[people]``: detect and track people in every scan (issue 7; published on
+    ``loci/<robot>/people``, what follow-me follows).
+
+    Attributes:
+        enabled: run the leg detector on every scan (off: no people, no follow-me).
+        model: the leg detector (a ``loci.people-model/2`` ``.npz``), or ``"default"`` for the
+            bundled one.
+        mask: hide the detected legs from the place classifier, the local map and the doorway
+            detector (a person walking ahead otherwise makes a corridor look like a room).
+    """
+
+    enabled: bool = True
+    model: str = "default"
+    mask: bool = True
+
+    @property
+    def model_path(self) -> Path:
+        from knowledge.people.detector import DEFAULT_MODEL
+
+        return DEFAULT_MODEL if self.model == "default" else Path(self.model)
+
+
+@dataclass(frozen=True)
 class AgentConfig:
     """The whole configuration (see the module docstring); build it with :func:`load_config`."""
 
@@ -371,6 +397,7 @@ class AgentConfig:
     conceptual: ConceptualConfig = field(default_factory=ConceptualConfig)
     objects: ObjectsConfig = field(default_factory=ObjectsConfig)
     follow: FollowConfig = field(default_factory=FollowConfig)
+    people: PeopleConfig = field(default_factory=PeopleConfig)
     file: Path | None = None
 
     @property
@@ -476,6 +503,7 @@ _SECTIONS = (
     "conceptual",
     "objects",
     "follow",
+    "people",
 )
 
 
@@ -535,7 +563,7 @@ def load_config(
     if base is not None:
         for section, key in _PATH_KEYS:
             v = data.get(section, {}).get(key)
-            if isinstance(v, str) and v and not (section == "places" and v == "default"):
+            if isinstance(v, str) and v and not (key == "model" and v == "default"):
                 p = Path(v).expanduser()
                 data[section][key] = str(p if p.is_absolute() else base / p)
         for section, key in _PATH_LIST_KEYS:
@@ -626,5 +654,6 @@ def _build(data: Mapping[str, Mapping[str, Any]], file: Path | None, env: Mappin
         conceptual=conceptual,
         objects=objects,
         follow=build_dataclass(FollowConfig, sec("follow"), "follow"),
+        people=build_dataclass(PeopleConfig, sec("people"), "people"),
         file=file,
     )

@@ -19,8 +19,9 @@ lost. Contents (``docs/agent.md``):
 - ``look_around`` → accepted, the base turns once (``base/cmd``); camera recognitions
   (:meth:`DialogueAgent.on_detections`) become objects of the current area and node; the
   report is ``{"objects": [{"name", "kind"}], "area": AREA}``;
-- ``follow_me`` → accepted; each scan goes through people detection and follow-me
-  (:meth:`DialogueAgent.on_scan`) to goals on ``base/goal``; ``stop`` cancels everything;
+- ``follow_me`` → accepted; the people of each scan (the pipeline's
+  :attr:`~agent.pipeline.StepResult.people`) go through follow-me (:meth:`DialogueAgent.on_scan`)
+  to goals on ``base/goal``; refused when people detection is off; ``stop`` cancels everything;
 - ``answer`` → the open question (``loci.ask/1``).
 
 AREA is ``{"id", "class", "types", "names", "objects", "current"}`` (the pipeline's class,
@@ -292,7 +293,7 @@ class DialogueAgent:
         can_recognise: whether camera recognitions will come (look_around needs them).
         follow_factory: makes a follow-me controller (``agent.follow.FollowMe``); None:
             import ``agent.follow`` when asked (an error reply if it is not there).
-        people_factory: makes the people pipeline (default: ``PeoplePipeline()``).
+        people: whether the scans come with people (``[people] enabled``); follow-me needs them.
         on_map_changed: called after the dialogue changed the map (a doorway removed).
         clock: seconds since the epoch.
     """
@@ -304,7 +305,7 @@ class DialogueAgent:
         *,
         can_recognise: bool = False,
         follow_factory: Callable[[], Any] | None = None,
-        people_factory: Callable[[], Any] | None = None,
+        people: bool = True,
         on_map_changed: Callable[[], None] | None = None,
         clock: Callable[[], float] = time.time,
     ) -> None:
@@ -312,7 +313,7 @@ class DialogueAgent:
         self.concepts: Concepts = concepts if concepts is not None else MemoryConcepts()
         self.can_recognise = can_recognise
         self._follow_factory = follow_factory
-        self._people_factory = people_factory
+        self.people_on = people
         self._on_map_changed = on_map_changed
         self.clock = clock
         self.pose: tuple[float, float, float] | None = None
@@ -323,7 +324,6 @@ class DialogueAgent:
         self.look: _Look | None = None
         self.follow: Any = None
         self._follow_task: _Task | None = None
-        self._people: Any = None
         self._pending_events: list[AreaEvent] = []
         self._checked_revision = -1
         self._seq = 0
@@ -662,12 +662,8 @@ class DialogueAgent:
             except ImportError as exc:
                 raise LociError("I cannot follow people: follow-me is not installed (agent.follow).") from exc
             self._follow_factory = FollowMe
-        if self._people is None:
-            if self._people_factory is None:
-                from knowledge.people.pipeline import PeoplePipeline
-
-                self._people_factory = PeoplePipeline
-            self._people = self._people_factory()
+        if not self.people_on:
+            raise LociError("I cannot follow people: people detection is off ([people] enabled = false).")
         self.tasks = {k: t for k, t in self.tasks.items() if t.kind != "go_to"}
         self.look = None
         self.follow = self._follow_factory()
@@ -754,15 +750,15 @@ class DialogueAgent:
     def on_pose(self, pose: tuple[float, float, float]) -> None:
         self.pose = pose
 
-    def on_scan(self, scan: Any, pose: tuple[float, float, float]) -> list[Outgoing]:
-        """One processed scan and the laser's odometry pose: people and follow-me goals while following."""
+    def on_scan(self, scan: Any, pose: tuple[float, float, float], people: Any = None) -> list[Outgoing]:
+        """One processed scan, the laser's odometry pose and the scan's people (a
+        :class:`~knowledge.people.pipeline.PeopleFrame` tracked in the odometry frame, or None):
+        follow-me goals while following (a scan without people counts as nobody seen)."""
         self.pose = pose
-        if self.follow is None or self._people is None:
+        if self.follow is None:
             return []
-        frame = self._people.process_scan(scan, sensor_pose=pose)
-        people = frame.to_json("odom")
-        out = [Outgoing("people", people)]
-        step = self.follow.update(frame, pose, float(scan.stamp))
+        out: list[Outgoing] = []
+        step = self.follow.update(people if people is not None else [], pose, float(scan.stamp))
         task = self._follow_task.intent if self._follow_task is not None else None
         message = getattr(step, "message", None)
         if message:

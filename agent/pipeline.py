@@ -5,6 +5,15 @@ scan's stamp (:mod:`agent.odom_sync`) and runs, in this order:
 
 1. the laser's pose: the robot pose composed with the laser's mount (every position below,
    graph nodes included, is the laser's, in the odometry frame);
+1a. people (``[people]``, on by default): the leg detector, leg pairing and tracking of
+   :class:`~knowledge.people.pipeline.PeoplePipeline` on the scan as measured, tracks in the
+   odometry frame (:attr:`StepResult.people`); with ``mask`` the beams of detected legs
+   (:func:`~knowledge.people.masking.person_beams`) are hidden: the classifier's scan gets
+   the walls behind them continued (:func:`~knowledge.people.masking.fill_masked`), the
+   local map gets no information there (:func:`~knowledge.people.masking.unknown_masked`);
+   a 360° laser's doorway detector sees the scan as measured (the leg detector takes door
+   jambs passed closely for legs), a front laser's sees the local map, which remembers the
+   jambs; docs/people.md "In the agent" has the measurements behind this;
 2. a front laser (less than a full turn): its beam endpoints go into the sparse local map
    and the 360° scan gets its rear beams from that map, beams without a hit interpolated
    (Sect. 3.5, :func:`~knowledge.metric.rear_beams.full_scan`); a 360° laser is only
@@ -45,10 +54,15 @@ from knowledge.metric.rear_beams import FullScanParams, full_scan
 from knowledge.navigation import persistence
 from knowledge.navigation.doorways import Doorway, DoorwayDetector, DoorwayParams, scan_points
 from knowledge.navigation.graph import DOORWAY, GraphParams, GraphUpdate, NavigationGraph
+from knowledge.people.detector import LegDetector
+from knowledge.people.masking import fill_masked, person_beams, unknown_masked
+from knowledge.people.pipeline import PeopleFrame, PeoplePipeline
 from knowledge.places.model import PlaceModel
 from knowledge.topology.areas import AreaEvent, AreaMap
 
 __all__ = [
+    "DOORWAY_INPUTS",
+    "PeopleParams",
     "Pipeline",
     "PipelineParams",
     "StepResult",
@@ -58,6 +72,47 @@ __all__ = [
 ]
 
 TWO_PI = 2.0 * math.pi
+#: What the doorway detector of a 360° laser (which sees the current scan) gets where legs
+#: were detected: ``"raw"`` (the legs as obstacles; the default: the leg detector takes door
+#: jambs passed at arm's length for legs, and hiding them hid the door in 5 of 8 tour runs),
+#: ``"unknown"`` (no points there), ``"filled"`` (what the classifier sees). A front laser's
+#: doorway detector sees the local map, which has no legs but remembers the jambs from the
+#: scans before. docs/people.md "In the agent".
+DOORWAY_INPUTS = ("raw", "unknown", "filled")
+
+
+@dataclass(frozen=True)
+class PeopleParams:
+    """People in the pipeline (``[people]``).
+
+    Attributes:
+        enabled: detect and track people in every scan.
+        mask: hide the beams of detected legs from the classifier, the local map and the
+            doorway detector (needs ``enabled``).
+        margin: beams added on each side of a leg (mixed pixels, see
+            :func:`~knowledge.people.masking.person_beams`).
+        clearance: metres; only legs standing this much in front of what is beside them
+            are masked (:func:`~knowledge.people.masking.free_standing`; 0: every leg).
+        doorways: what a 360° laser's doorway detector sees where legs were (:data:`DOORWAY_INPUTS`).
+    """
+
+    enabled: bool = True
+    mask: bool = True
+    margin: int = 1
+    clearance: float = 0.2
+    doorways: str = "raw"
+
+    def __post_init__(self) -> None:
+        if self.margin < 0:
+            raise ValueError(f"margin must be a number of beams >= 0, got {self.margin}")
+        if not (math.isfinite(self.clearance) and self.clearance >= 0):
+            raise ValueError(f"clearance must be a distance >= 0 metres, got {self.clearance}")
+        if self.doorways not in DOORWAY_INPUTS:
+            raise ValueError(f"doorways must be one of {DOORWAY_INPUTS}, got {self.doorways!r}")
+
+    @property
+    def masking(self) -> bool:
+        return self.enabled and self.mask
 
 
 @dataclass(frozen=True)
@@ -70,6 +125,7 @@ class PipelineParams:
         rear_beams: rear-beam simulation (``n_beams`` and ``max_range`` are the model's).
         graph: the navigation graph (node distance d, label window N, ...).
         doorways: the doorway detector.
+        people: people detection and masking.
     """
 
     mount: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -77,6 +133,7 @@ class PipelineParams:
     rear_beams: FullScanParams = field(default_factory=FullScanParams)
     graph: GraphParams = field(default_factory=GraphParams)
     doorways: DoorwayParams = field(default_factory=DoorwayParams)
+    people: PeopleParams = field(default_factory=PeopleParams)
 
     def __post_init__(self) -> None:
         m = tuple(float(v) for v in self.mount)
@@ -92,6 +149,7 @@ class PipelineParams:
             rear_beams=config.rear_beams,
             graph=config.navigation,
             doorways=config.doorways,
+            people=PeopleParams(enabled=config.people.enabled, mask=config.people.mask),
         )
 
     def to_table(self) -> dict[str, Any]:
@@ -102,14 +160,19 @@ class PipelineParams:
             "rear_beams": dataclass_table(self.rear_beams),
             "graph": dataclass_table(self.graph),
             "doorways": dataclass_table(self.doorways),
+            "people": dataclass_table(self.people),
         }
 
     @classmethod
     def from_table(cls, table: Mapping[str, Any]) -> PipelineParams:
-        """The inverse of :meth:`to_table` (unknown keys are a ConfigError)."""
+        """The inverse of :meth:`to_table` (unknown keys are a ConfigError).
+
+        A table without ``people`` was written before the pipeline detected people: people
+        are off, so a replay of an old recording builds the graph it built.
+        """
         from knowledge.errors import ConfigError
 
-        known = {"mount", "local_map", "rear_beams", "graph", "doorways"}
+        known = {"mount", "local_map", "rear_beams", "graph", "doorways", "people"}
         unknown = sorted(set(table) - known)
         if unknown:
             raise ConfigError(f"pipeline parameters: unknown key {unknown[0]!r}")
@@ -122,6 +185,7 @@ class PipelineParams:
             rear_beams=build_dataclass(FullScanParams, table.get("rear_beams", {}), "rear_beams"),
             graph=build_dataclass(GraphParams, table.get("graph", {}), "graph"),
             doorways=build_dataclass(DoorwayParams, table.get("doorways", {}), "doorways"),
+            people=build_dataclass(PeopleParams, table.get("people", {"enabled": False}), "people"),
         )
 
 
@@ -140,6 +204,8 @@ class StepResult:
         in_opening: the robot is inside a door-like opening now.
         update: what the navigation graph did.
         events: the areas' change events.
+        people: the people of this scan (None: people detection is off).
+        masked: ``(B,)`` bool, the scan's beams hidden as people (None: nothing hidden).
     """
 
     scan: LaserScan
@@ -151,6 +217,8 @@ class StepResult:
     in_opening: bool
     update: GraphUpdate
     events: tuple[AreaEvent, ...]
+    people: PeopleFrame | None = None
+    masked: np.ndarray | None = None
 
     @property
     def stamp(self) -> float:
@@ -200,6 +268,8 @@ class Pipeline:
         model: the place model; its ``scan`` parameters fix the 360° scan's beams and range.
         params: everything else.
         graph, areas: a graph (and its areas) to continue (see :meth:`from_state`).
+        people_detector: the leg detector (default: the bundled model, loaded when
+            ``params.people.enabled``).
     """
 
     def __init__(
@@ -209,6 +279,7 @@ class Pipeline:
         *,
         graph: NavigationGraph | None = None,
         areas: AreaMap | None = None,
+        people_detector: LegDetector | None = None,
     ) -> None:
         prm = params or PipelineParams()
         self.model = model
@@ -218,6 +289,8 @@ class Pipeline:
         )
         self.classes = tuple(model.classes)
         self.local_map = LocalMap(self.params.local_map)
+        pp = self.params.people
+        self.people: PeoplePipeline | None = PeoplePipeline(people_detector) if pp.enabled else None
         self.detector = DoorwayDetector(self.params.doorways)
         self.graph = graph if graph is not None else NavigationGraph(self.params.graph)
         self.areas = areas if areas is not None else AreaMap()
@@ -247,14 +320,37 @@ class Pipeline:
         sensor = compose(pose, self.params.mount)
         angles = self._beam_angles(scan)
         fsp = self.params.rear_beams
-        if is_full_turn(scan):
-            ranges = full_scan(
-                scan.ranges, angles, range_max=scan.range_max, params=fsp, range_min=scan.range_min
+        full = is_full_turn(scan)
+        frame: PeopleFrame | None = None
+        mask: np.ndarray | None = None
+        raw = scan.ranges
+        cls_r = map_r = door_r = raw
+        if self.people is not None:
+            frame = self.people.process_scan(
+                scan, sensor_pose=(float(sensor[0]), float(sensor[1]), float(sensor[2]))
             )
-            points = scan_points(scan.ranges, angles, range_max=scan.range_max, range_min=scan.range_min)
+            pp = self.params.people
+            if pp.mask:
+                m = person_beams(frame.detection, margin=pp.margin, clearance=pp.clearance or None)
+                if m.any():
+                    mask = m
+                    cls_r = fill_masked(
+                        raw,
+                        m,
+                        range_max=scan.range_max,
+                        range_min=scan.range_min,
+                        circular=full,
+                        angle_min=scan.angle_min,
+                        angle_increment=scan.angle_increment,
+                    )
+                    map_r = unknown_masked(raw, m)
+                    door_r = {"unknown": map_r, "raw": raw, "filled": cls_r}[pp.doorways]
+        if full:
+            ranges = full_scan(cls_r, angles, range_max=scan.range_max, params=fsp, range_min=scan.range_min)
+            points = scan_points(door_r, angles, range_max=scan.range_max, range_min=scan.range_min)
         else:
             self.local_map.add(
-                scan.ranges,
+                map_r,
                 angles,
                 sensor,
                 stamp=scan.stamp,
@@ -262,7 +358,7 @@ class Pipeline:
                 range_min=scan.range_min,
             )
             ranges = full_scan(
-                scan.ranges,
+                cls_r,
                 angles,
                 range_max=scan.range_max,
                 pose=sensor,
@@ -291,6 +387,8 @@ class Pipeline:
             in_opening=in_opening,
             update=upd,
             events=events,
+            people=frame,
+            masked=mask,
         )
 
     # ------------------------------------------------------------------ documents
@@ -303,7 +401,12 @@ class Pipeline:
 
     @classmethod
     def from_state(
-        cls, document: Mapping[str, Any], model: PlaceModel, params: PipelineParams | None = None
+        cls,
+        document: Mapping[str, Any],
+        model: PlaceModel,
+        params: PipelineParams | None = None,
+        *,
+        people_detector: LegDetector | None = None,
     ) -> Pipeline:
         """A pipeline continuing the graph and areas of a ``loci.navgraph/1`` document.
 
@@ -318,7 +421,7 @@ class Pipeline:
         graph, areas = persistence.from_document(dict(document))
         graph.params = prm.graph
         graph.recent = deque(graph.recent, maxlen=prm.graph.window)
-        return cls(model, prm, graph=graph, areas=areas)
+        return cls(model, prm, graph=graph, areas=areas, people_detector=people_detector)
 
     def messages(self, stamp: float | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
         """The ``loci.graph/1`` and ``loci.areas/1`` messages of the current state."""
@@ -327,10 +430,12 @@ class Pipeline:
         return graph_message(doc, when), areas_message(doc, when)
 
     @staticmethod
-    def warm_up(model: PlaceModel, params: PipelineParams | None = None) -> None:
+    def warm_up(
+        model: PlaceModel, params: PipelineParams | None = None, *, people_detector: LegDetector | None = None
+    ) -> None:
         """Run a throwaway pipeline on synthetic front and 360° scans, so the compiled kernels
         are ready before the first real scan (the first call of each takes a while)."""
-        p = Pipeline(model, params)
+        p = Pipeline(model, params, people_detector=people_detector)
         for i, (n, fov) in enumerate(((361, math.pi), (360, TWO_PI))):
             inc = fov / (n - 1) if fov < TWO_PI else fov / n
             angle_min = -fov / 2 if fov < TWO_PI else 0.0

@@ -30,7 +30,10 @@ None of them drops while the agent keeps up; the diagnostics and the final repor
 one did.
 
 Published per processed scan: ``place`` (``loci.place/1``), ``tf`` (odom → laser),
-``scan/full`` (the 360° scan); when they change: ``graph``, ``graph/scene``, ``areas``,
+``scan/full`` (the 360° scan); with ``[people]`` on, for each scan with legs or tracks in
+it (and one empty message after the last such scan, which clears the picture) ``people``
+(``loci.people/1``, tracks in the odometry frame) and ``people/scene``
+(``foxglove.SceneUpdate``); when they change: ``graph``, ``graph/scene``, ``areas``,
 ``areas/scene``; every period: ``diagnostics``. A malformed message on a subscribed stream
 is logged, counted (``invalid``) and ignored.
 
@@ -78,7 +81,7 @@ from agent.bus.codecs import (
 from agent.bus.diagnostics import diagnostics_message, publish_diagnostics
 from agent.bus.keys import Policy, RobotKeys, robot_wildcard
 from agent.bus.queryable import StateCell, StateQueryable
-from agent.bus.scene import areas_scene, graph_scene
+from agent.bus.scene import areas_scene, graph_scene, people_scene
 from agent.bus.session import close_session, listening_endpoints, open_session
 from agent.config import AgentConfig
 from agent.dialogue_agent import DialogueAgent, MemoryConcepts, Outgoing, run_dialogue
@@ -89,6 +92,7 @@ from drivers.messages import LaserScan, Pose2D
 from knowledge.errors import ConfigError, DataError, ProtocolError
 from knowledge.fileio import atomic_write_text
 from knowledge.navigation import persistence
+from knowledge.people.detector import LegDetector
 from knowledge.places.model import PlaceModel
 from knowledge.topology.areas import AreaCreated
 
@@ -238,6 +242,7 @@ class Agent:
         self._status_sub: Subscription[Any] | None = None
         self._camera_sub: Subscription[Any] | None = None
         self._concepts_version: Any = None
+        self._people_shown = False
 
     # ------------------------------------------------------------------ setup
     def _load(self) -> tuple[PlaceModel, Pipeline]:
@@ -247,11 +252,12 @@ class Agent:
                 f"places.model: {cfg.places.model_path} is not a file; give a place model (.npz) or 'default'"
             )
         model = self._model or PlaceModel.load(cfg.places.model_path)
+        detector = self._people_detector()
         state = cfg.state.path
         if cfg.state.resume and state.exists():
             try:
                 doc = json.loads(state.read_text(encoding="utf-8"))
-                pipeline = Pipeline.from_state(doc, model, self.params)
+                pipeline = Pipeline.from_state(doc, model, self.params, people_detector=detector)
             except (ValueError, ProtocolError) as exc:
                 raise DataError(
                     f"{state}: {exc}. Move the file aside to start a new map, or set state.resume = false"
@@ -264,9 +270,25 @@ class Agent:
                 len(pipeline.areas.areas),
             )
         else:
-            pipeline = Pipeline(model, self.params)
-        Pipeline.warm_up(model, self.params)
+            pipeline = Pipeline(model, self.params, people_detector=detector)
+        Pipeline.warm_up(model, self.params, people_detector=detector)
         return model, pipeline
+
+    def _people_detector(self) -> LegDetector | None:
+        """The leg detector of ``[people]`` (None when people detection is off).
+
+        Raises:
+            ConfigError: the model file is missing.
+        """
+        pc = self.config.people
+        if not pc.enabled:
+            return None
+        if not pc.model_path.is_file():
+            raise ConfigError(
+                f"people.model: {pc.model_path} is not a file; give a leg detector (.npz), "
+                "'default', or set people.enabled = false"
+            )
+        return LegDetector.load(pc.model_path)
 
     def _recording_path(self) -> Path | None:
         path = self.config.record.path
@@ -300,7 +322,15 @@ class Agent:
             "diagnostics",
         ):
             self._pubs[stream] = publish_stream(session, self.robot, stream, stats=self.stats)
-        for stream in ("dialogue/say", "dialogue/ask", "base/goal", "base/cmd", "people", "objects"):
+        for stream in (
+            "dialogue/say",
+            "dialogue/ask",
+            "base/goal",
+            "base/cmd",
+            "people",
+            "people/scene",
+            "objects",
+        ):
             self._pubs[stream] = publish_stream(session, self.robot, stream, stats=self.stats)
         if self.config.laser.source == "lms":
             self._pubs["scan"] = publish_stream(session, self.robot, "scan", stats=self.stats)
@@ -336,6 +366,7 @@ class Agent:
             self.concepts,
             can_recognise=self._recogniser is not None,
             follow_factory=self._follow_factory(),
+            people=cfg.people.enabled,
             on_map_changed=self._map_changed,
         )
         # what the map already holds (a resumed map) goes to the concepts first
@@ -514,6 +545,14 @@ class Agent:
         self._pubs["tf"].put(frame_transform(result.pose, result.scan.frame_id))
         assert self.pipeline is not None
         self._pubs["scan/full"].put(full_scan_message(result, self.pipeline.params.rear_beams.max_range))
+        if result.people is not None:
+            frame = result.people
+            seen = bool(frame.legs.shape[0] or frame.tracks)
+            if seen or self._people_shown:  # an empty frame once, to clear, then quiet
+                people = frame.to_json("odom")
+                self._pubs["people"].put(people)
+                self._pubs["people/scene"].put(people_scene(people))
+            self._people_shown = seen
         if result.graph_changed or result.areas_changed:
             self._publish_state(result.stamp)
         if result.state_changed:
@@ -524,7 +563,7 @@ class Agent:
             if result.events:
                 self.dialogue.on_area_events(result.events)
             p = result.pose
-            for out in self.dialogue.on_scan(result.scan, (p.x, p.y, p.theta)):
+            for out in self.dialogue.on_scan(result.scan, (p.x, p.y, p.theta), result.people):
                 self._send(out)
 
     def _publish_state(self, stamp: float, *, force: bool = False) -> None:

@@ -10,9 +10,11 @@ import asyncio
 import itertools
 import json
 import math
+import types
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import pytest
 from test_consistency import drive
 
@@ -332,3 +334,36 @@ def test_follow_me_starts_follow_me_and_stop_ends_it() -> None:
     assert reply["status"] == "accepted" and rest == [] and agent.follow is not None
     reply, rest = handle(agent, intent("stop"))
     assert reply["content"]["stopped"] == ["follow_me"] and agent.follow is None
+
+
+def test_follow_me_follows_the_pipelines_people_and_is_refused_without_them() -> None:
+    """The people come with each scan (the pipeline's frame); follow-me makes goals from them."""
+    pytest.importorskip("agent.follow", reason="follow-me (agent/follow.py) is not there yet")
+    from knowledge.people.detector import LegDetector
+    from knowledge.people.pairing import pair_legs
+    from knowledge.people.pipeline import PeopleFrame
+    from knowledge.people.tracking import TrackState
+
+    world, *_ = office()
+    off, _ = agent_for(world, people=False)
+    reply, _ = handle(off, intent("follow_me"))
+    assert reply["status"] == "error" and "people detection is off" in reply["text"]
+
+    agent, clock = agent_for(world)
+    handle(agent, intent("follow_me"))
+
+    empty = LegDetector.load().detect(np.full(360, 3.0), 0.0, math.pi / 180, range_max=30.0)
+
+    def Frame(tracks: list[TrackState]) -> PeopleFrame:  # noqa: N802 - reads as the class it makes
+        return PeopleFrame(clock(), empty, np.zeros((0, 2)), pair_legs(np.zeros((0, 2))), tracks)
+
+    def person(x: float, y: float) -> TrackState:
+        return TrackState(3, np.array([x, y]), np.zeros(2), np.eye(4) * 0.01, 5, 0, 5, 0.0, clock())
+
+    scan = types.SimpleNamespace(stamp=clock() + 0.1)
+    out = agent.on_scan(scan, (0.0, 0.0, 0.0), Frame([person(3.0, 0.0)]))
+    goals = [o.message for o in out if o.stream == "base/goal"]
+    assert len(goals) == 1 and goals[0]["goal"]["x"] == pytest.approx(2.0)  # 1 m short of the person
+    assert all(o.stream != "people" for o in out)  # the runtime publishes the people, every scan
+    quiet = agent.on_scan(types.SimpleNamespace(stamp=clock() + 0.2), (0.0, 0.0, 0.0), None)
+    assert all(o.stream != "base/goal" for o in quiet)  # nobody seen: no new goal

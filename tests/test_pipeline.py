@@ -17,7 +17,15 @@ import numpy as np
 import pytest
 
 from agent.bus.schemas import SCHEMAS
-from agent.pipeline import Pipeline, PipelineParams, areas_message, compose, graph_message, place_message
+from agent.pipeline import (
+    PeopleParams,
+    Pipeline,
+    PipelineParams,
+    areas_message,
+    compose,
+    graph_message,
+    place_message,
+)
 from drivers.messages import LaserScan, Pose2D
 from knowledge.metric.buildings import Building, Door, generate_building
 from knowledge.metric.raycast import cast
@@ -211,3 +219,46 @@ def test_mount_and_stamp_order() -> None:
         )
     with pytest.raises(ValueError, match="mount"):
         PipelineParams(mount=(0.0, math.nan, 0.0))
+
+
+def test_people_come_with_every_step_and_the_parameters_round_trip() -> None:
+    """A person 1.5 m ahead in a 360° scan of a round room: detected, tracked in the odometry
+    frame, masked from the classifier's scan (which then equals the empty room's)."""
+    from drivers.sim.lms_world import ray_circle_ranges
+    from knowledge.errors import ConfigError
+    from knowledge.people.pipeline import PeopleFrame
+
+    model = PlaceModel.load(default_model_path())
+    n, inc = 720, math.pi / 360
+    angles = inc * np.arange(n)
+    room = np.full(n, 4.0)
+    legs = np.array([[1.5, 0.12], [1.55, -0.12]])
+    seen = np.minimum(room, ray_circle_ranges((0.0, 0.0), angles, legs, np.full(2, 0.06)))
+    with_people = Pipeline(model)
+    without = Pipeline(model, PipelineParams(people=PeopleParams(enabled=False)))
+    empty = Pipeline(model, PipelineParams(people=PeopleParams(enabled=False)))
+    for k in range(5):
+        t = 100.0 + 0.1 * k
+        odom = Pose2D(2.0, 1.0, math.pi / 2, stamp=t)  # the laser looks along +y of the odometry frame
+        r = with_people.process(LaserScan(t, k, "laser", 0.0, inc, 30.0, seen.astype(np.float32)), odom)
+        b = without.process(LaserScan(t, k, "laser", 0.0, inc, 30.0, seen.astype(np.float32)), odom)
+        e = empty.process(LaserScan(t, k, "laser", 0.0, inc, 30.0, room.astype(np.float32)), odom)
+    assert b.people is None and b.masked is None
+    assert isinstance(r.people, PeopleFrame) and r.masked is not None
+    hit = seen < room - 0.05
+    assert np.array_equal(r.masked, hit)
+    assert np.abs(r.ranges - e.ranges).max() < 0.05  # the classifier saw the empty room
+    assert np.abs(b.ranges - e.ranges).max() > 1.0  # without masking it saw the legs
+    assert len(r.people.people) == 1
+    x, y = r.people.people.positions[0]
+    assert (x, y) == pytest.approx((2.0, 2.5), abs=0.1)  # 1.5 m ahead of the laser, odometry frame
+    SCHEMAS.validate(r.people.to_json("odom"))
+    # parameters: in the recordings' table, and old tables (before people) mean people off
+    params = PipelineParams(people=PeopleParams(mask=False, doorways="unknown"))
+    assert PipelineParams.from_table(params.to_table()) == params
+    old = {k: v for k, v in PipelineParams().to_table().items() if k != "people"}
+    assert PipelineParams.from_table(old).people.enabled is False
+    with pytest.raises(ConfigError, match="doorways"):
+        PipelineParams.from_table({"people": {"doorways": "sometimes"}})
+    with pytest.raises(ValueError, match="margin"):
+        PeopleParams(margin=-1)

@@ -222,7 +222,20 @@ def test_live_run_publishes_answers_records_and_replays_to_the_same_map(
     robot, lms, session, endpoint = sim
     config = write_config(tmp_path, endpoint, lms.link)
     out = tmp_path / "run.mcap"
-    seen = Collector(session, ["place", "graph", "areas", "diagnostics", "graph/scene", "tf", "scan/full"])
+    seen = Collector(
+        session,
+        [
+            "place",
+            "graph",
+            "areas",
+            "diagnostics",
+            "graph/scene",
+            "tf",
+            "scan/full",
+            "people",
+            "people/scene",
+        ],
+    )
     with FakeBase(session, robot):
         agent = AgentProcess(config, "--record", str(out))
         try:
@@ -262,6 +275,15 @@ def test_live_run_publishes_answers_records_and_replays_to_the_same_map(
     assert len(seen.samples["place"]) >= 0.9 * summary["scans_processed"]
     # (sensor-class streams publish with congestion control DROP: a sample may go missing)
     assert min(len(seen.samples["tf"]), len(seen.samples["scan/full"])) >= 0.9 * summary["scans_processed"]
+    # people ([people] is on by default): only scans with legs or tracks (and one empty
+    # message after them) are published, in the odometry frame
+    people = seen.json("people")
+    assert len(people) <= summary["scans_processed"]
+    for message in people:
+        SCHEMAS.validate(message)
+        assert message["frame_id"] == "odom"
+    shown = [bool(m["legs"] or m["tracks"]) for m in people]
+    assert all(a or b for a, b in itertools.pairwise(shown))  # never two empty ones in a row
     assert seen.json("graph")[-1]["nodes"] == graph["nodes"] and seen.samples["graph/scene"]
     assert seen.json("areas")[-1]["areas"] == areas["areas"]
     diag = seen.json("diagnostics")

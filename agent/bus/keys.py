@@ -125,7 +125,14 @@ STREAMS: dict[str, StreamSpec] = {
             "loci.people/1",
             "agent → all",
             Policy.DROP_OLDEST,
-            "people in the laser scans: legs, persons, tracks (while following)",
+            "people in every laser scan: legs, persons, tracks (odometry frame)",
+        ),
+        StreamSpec(
+            "people/scene",
+            "foxglove.SceneUpdate",
+            "agent → all",
+            Policy.DROP_OLDEST,
+            "the people's tracks and legs for Foxglove's 3D panel",
         ),
         StreamSpec(
             "objects",

@@ -7,15 +7,20 @@ Built from plain dicts so the core's classes need not know Foxglove:
   ``label`` a class name or None; positions in metres in ``frame_id``. Edges may also be
   ``{"source": a, "target": b, ...}`` objects, as in the ``loci.navgraph/1`` document.
 * areas: ``{"areas": [{"id", "label", "nodes": [node ids]}, ...]}`` (``loci.areas/1``).
+* people: ``{"legs": [[x, y], ...], "tracks": [{"id", "x", "y", "vx", "vy", ...}], "frame_id"}``
+  (``loci.people/1``).
 
 The graph is one entity ``graph``: a sphere per node coloured by its class (doorway nodes in
 the doorway colour, unlabelled nodes grey), and the edges as one line list. The areas are
-one entity ``areas``: a text label per area over the centroid of its nodes. Each update
+one entity ``areas``: a text label per area over the centroid of its nodes. The people are
+one entity ``people``: a cylinder per confirmed track (a body of :data:`PERSON_SIZE`) with its
+id above it and an arrow of its velocity, and a small sphere per detected leg. Each update
 replaces the whole entity, so nodes or areas that disappeared disappear from the picture.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -25,6 +30,11 @@ from knowledge.labels import CLASS_CODES, CLASS_COLORS_BGR
 
 #: Sphere diameter of a node, metres.
 NODE_SIZE = 0.25
+#: A person's cylinder: diameter and height, metres.
+PERSON_SIZE = (0.5, 1.7)
+#: Sphere diameter of a leg, metres.
+LEG_SIZE = 0.12
+_PERSON_RGBA = (0.95, 0.55, 0.1, 0.8)
 _UNKNOWN_RGBA = (0.6, 0.6, 0.6, 1.0)
 
 
@@ -122,4 +132,63 @@ def areas_scene(
             )
         )
     entity = fg.SceneEntity(timestamp=when, frame_id=frame_id, id="areas", texts=texts)
+    return fg.SceneUpdate(entities=[entity])
+
+
+def people_scene(people: Mapping[str, Any], *, stamp: float | None = None) -> fg.SceneUpdate:
+    """The people of a ``loci.people/1`` message as a SceneUpdate (entity ``people``): a
+    cylinder per track with its id and an arrow of its velocity (one second ahead), a sphere
+    per leg. ``frame_id`` and ``stamp`` default to the message's."""
+    when = _stamp(people.get("stamp", 0.0) if stamp is None else stamp)
+    color = _color(_PERSON_RGBA)
+    d, h = PERSON_SIZE
+    cylinders, texts, arrows, spheres = [], [], [], []
+    for t in people.get("tracks", ()):
+        x, y = float(t["x"]), float(t["y"])
+        cylinders.append(
+            fg.CylinderPrimitive(
+                pose=_pose(x, y, h / 2),
+                size=fg.Vector3(x=d, y=d, z=h),
+                color=color,
+                bottom_scale=1.0,
+                top_scale=1.0,
+            )
+        )
+        texts.append(
+            fg.TextPrimitive(
+                pose=_pose(x, y, h + 0.2), billboard=True, font_size=0.3, color=color, text=f"#{t['id']}"
+            )
+        )
+        vx, vy = float(t.get("vx", 0.0)), float(t.get("vy", 0.0))
+        speed = math.hypot(vx, vy)
+        if speed > 0.05:
+            yaw = math.atan2(vy, vx)
+            q = fg.Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))
+            arrows.append(
+                fg.ArrowPrimitive(
+                    pose=fg.Pose(position=fg.Vector3(x=x, y=y, z=0.1), orientation=q),
+                    shaft_length=speed,
+                    shaft_diameter=0.04,
+                    head_length=0.15,
+                    head_diameter=0.12,
+                    color=color,
+                )
+            )
+    for x, y in people.get("legs", ()):
+        spheres.append(
+            fg.SpherePrimitive(
+                pose=_pose(float(x), float(y), 0.1),
+                size=fg.Vector3(x=LEG_SIZE, y=LEG_SIZE, z=LEG_SIZE),
+                color=color,
+            )
+        )
+    entity = fg.SceneEntity(
+        timestamp=when,
+        frame_id=str(people.get("frame_id", "odom")),
+        id="people",
+        cylinders=cylinders,
+        texts=texts,
+        arrows=arrows,
+        spheres=spheres,
+    )
     return fg.SceneUpdate(entities=[entity])

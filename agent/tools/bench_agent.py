@@ -62,7 +62,7 @@ from agent.bus.keys import stream_key
 from agent.bus.session import BusConfig, close_session, open_session
 from agent.bus.testing import session_pair, settle, wait_until
 from agent.odom_sync import OdomSync
-from agent.pipeline import Pipeline, place_message
+from agent.pipeline import PeopleParams, Pipeline, PipelineParams, place_message
 from drivers.messages import LaserScan, Pose2D
 from drivers.sick import telegrams as tg
 from drivers.sick.codec import StreamParser, Telegram
@@ -278,6 +278,18 @@ def bench_latency(
         finally:
             pub.close()
             sub.undeclare()
+    # the same scans through a pipeline without people: what detecting them costs per scan
+    bare = Pipeline(model, PipelineParams(people=PeopleParams(enabled=False)))
+    bare_ns = np.zeros(n, dtype=np.int64)
+    for i in range(n):
+        scan = scan_from_telegram(
+            next(e for e in StreamParser("reply").feed(telegrams[i]) if isinstance(e, Telegram)),
+            float(chunk.stamps[i]),
+            i + 1,
+        )
+        t0 = time.perf_counter_ns()
+        bare.process(scan, chunk.odom[i])
+        bare_ns[i] = time.perf_counter_ns() - t0
     keep = slice(warmup, n)
     ok = arrived[keep] > 0
     m = marks[keep][ok]
@@ -300,6 +312,7 @@ def bench_latency(
         "nodes": len(pipeline.graph),
         "total_ms": total,
         "stages_ms": {k: _percentiles(v / 1e6) for k, v in stage_ns.items()},
+        "pipeline_without_people_ms": _percentiles(bare_ns[keep] / 1e6),
         "cpu_parse_to_put_ms": _percentiles(cpu[keep][ok] / 1e6),
         "target_p99_ms": TARGET_P99_MS,
         "p99_vs_target": round(TARGET_P99_MS / total["p99"], 1),
@@ -657,6 +670,12 @@ def report(r: dict[str, Any]) -> str:
             s = lat["stages_ms"][name]
             lines.append(
                 f"  {name:9s} p50 {s['p50']:6.3f} ms   p99 {s['p99']:6.3f} ms   mean {s['mean']:6.3f} ms"
+            )
+        if "pipeline_without_people_ms" in lat:
+            b, p = lat["pipeline_without_people_ms"], lat["stages_ms"]["pipeline"]
+            lines.append(
+                f"  the pipeline without people detection: p50 {b['p50']:6.3f} ms   p99 {b['p99']:6.3f} ms "
+                f"(people add {p['p50'] - b['p50']:.3f} ms at p50)"
             )
         c = lat["cpu_parse_to_put_ms"]
         lines.append(

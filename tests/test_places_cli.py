@@ -1,4 +1,5 @@
-"""`loci places train|evaluate|label` and `loci demo` as a user types them."""
+"""`loci places train|evaluate|label` as a user types them (`loci places demo` is the old
+whole-map labeling demo; `loci demo` is the guided tour: tests/test_demo_tour.py)."""
 
 from __future__ import annotations
 

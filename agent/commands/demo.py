@@ -1,8 +1,8 @@
-"""``loci demo``: the main job on embedded defaults, no hardware and no data needed.
+"""``loci demo``: the guided tour of the book's Sect. 7.4, end to end (see :mod:`agent.demo.tour_run`).
 
-For now it shows place classification end to end: it generates an office floor, labels
-every free cell with the bundled place model, compares the labels with the floor's
-ground truth and writes pictures a person can look at.
+The simulated robot, the agent and the dialogue process run as separate processes on a
+loopback Zenoh bus; the tutor's lines are scripted (or typed with ``--interactive``). The
+whole-map labeling demo that used to be here is ``loci places demo``.
 """
 
 from __future__ import annotations
@@ -10,107 +10,92 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
 from pathlib import Path
-from typing import Any
+
+
+def _speed(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        v = -1.0
+    if not (0 < v <= 4):
+        raise argparse.ArgumentTypeError(f"--speed is a number in (0, 4], got {text!r}")
+    return v
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "demo",
-        help="run the demo on embedded defaults (no hardware, no data needed)",
-        description="Generate an office floor, label every free cell with the bundled place model, "
-        "score the labels against the floor's ground truth and write pictures of the result.",
+        help="the guided tour: follow me, a false doorway, look around, go to (no hardware needed)",
+        description=(
+            "Play the guided tour of the book's Sect. 7.4 on a simulated office: a tutor wakes the robot "
+            "at the charging station, the robot follows it through a door into a room, asks about a "
+            "false doorway, learns that the room is a living room from what it sees, then goes to the "
+            "television and back to the station. The simulator, the agent and the dialogue process run "
+            "as separate processes on a loopback Zenoh bus. Writes the transcript, the MCAP recording "
+            "(loci replay, Foxglove), the layered map (map.png) and summary.json to the output folder."
+        ),
+        epilog="Example: loci demo --out out/tour;  loci demo --interactive  (docs/demo.md)",
     )
-    p.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default out/demo)")
-    p.add_argument("--seed", type=int, default=7, help="seed of the generated office floor (default 7)")
-    p.add_argument("--model", type=Path, default=None, help="a place model (default: the bundled one)")
-    p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    p.add_argument("--out", type=Path, default=None, help="output folder (default: out/tour-YYYYmmdd-HHMMSS)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the tour's office (default 0)")
+    p.add_argument(
+        "--speed",
+        type=_speed,
+        default=1.5,
+        help="simulated seconds per wall-clock second (default 1.5)",
+    )
+    p.add_argument(
+        "--interactive",
+        action="store_true",
+        help="type the tutor's lines yourself; 'Follow me.' also makes the tutor walk the next leg",
+    )
+    p.add_argument("--no-replay", action="store_true", help="skip replaying the recording at the end")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON at the end")
     p.set_defaults(handler=cmd_demo)
 
 
-def _side_by_side(left: Any, right: Any, titles: tuple[str, str]) -> Any:
-    import cv2
-    import numpy as np
-
-    h = max(left.shape[0], right.shape[0])
-    pad = 12
-    band = 36
-    canvas = np.full((h + band, left.shape[1] + right.shape[1] + pad, 3), 255, np.uint8)
-    canvas[band : band + left.shape[0], : left.shape[1]] = left
-    canvas[band : band + right.shape[0], left.shape[1] + pad :] = right
-    for x, text in ((8, titles[0]), (left.shape[1] + pad + 8, titles[1])):
-        cv2.putText(canvas, text, (x, 25), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (30, 30, 30), 2, cv2.LINE_AA)
-    return canvas
-
-
 def cmd_demo(args: argparse.Namespace) -> int:
-    import numpy as np
+    from agent.demo.tour_run import DemoOptions, run_demo
 
-    from agent.progress import Progress
-    from knowledge import labels as lbl
-    from knowledge.fileio import write_image
-    from knowledge.metric.buildings import generate_tour_office
-    from knowledge.places.labeling import label_map
-    from knowledge.places.metrics import format_confusion, score
-    from knowledge.places.model import PlaceModel, default_model_path
-
-    t0 = time.perf_counter()
-    model = PlaceModel.load(args.model or default_model_path())
-    building = generate_tour_office(args.seed)
-    grid = building.grid
-    if not args.json:
-        w, h = grid.size_m
-        print(
-            f"generated office floor (seed {args.seed}): {w:.0f} m × {h:.0f} m, {int(grid.free.sum())} free cells"
-        )
-        print(f"labeling every free cell with {args.model or 'the bundled model'} ...", flush=True)
-    with Progress(enabled=not args.quiet) as progress:
-        result = label_map(grid, model, progress=progress)
-    # the truth, in the model's classes (a model without hallways calls them corridors)
-    truth_codes = building.labels[result.cells[:, 0], result.cells[:, 1]]
-    truth = np.array([lbl.CLASS_NAMES.get(int(c), "none") for c in truth_codes])
-    if "hallway" not in model.classes:
-        truth[truth == "hallway"] = "corridor"
-    s = score(truth, result.predicted(), model.classes)
-
-    args.out.mkdir(parents=True, exist_ok=True)
-    background = grid.to_image()
-    truth_img = lbl.overlay(background, building.labels)
-    pred_img = lbl.overlay(background, result.labels)
-    lbl.write_label_image(args.out / "labels.png", result.labels, result.legend)
-    write_image(args.out / "map.png", background)
-    write_image(args.out / "labels.overlay.png", pred_img)
-    write_image(
-        args.out / "comparison.png",
-        _side_by_side(
-            truth_img, pred_img, ("ground truth", f"classified ({100 * s.accuracy:.1f} % correct)")
-        ),
+    if args.seed < 0:
+        raise ValueError(f"--seed must be >= 0, got {args.seed}")
+    opts = DemoOptions(
+        out=args.out,
+        seed=args.seed,
+        speed=args.speed,
+        interactive=args.interactive,
+        replay=not args.no_replay,
     )
-    summary = {
-        "seed": args.seed,
-        "cells": len(result.cells),
-        "classes": list(model.classes),
-        "accuracy": s.accuracy,
-        "balanced_accuracy": s.balanced_accuracy,
-        "confusion": s.confusion.tolist(),
-        "timings_s": {k: round(v, 3) for k, v in result.timings.items()},
-        "outputs": sorted(str(p) for p in args.out.iterdir()),
-        "seconds": round(time.perf_counter() - t0, 3),
-    }
+    import signal
+
+    def on_term(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt  # the children are stopped on the way out
+
+    previous = signal.signal(signal.SIGTERM, on_term)
+    try:
+        summary = run_demo(opts)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     if args.json:
-        json.dump(summary, sys.stdout, indent=2)
+        json.dump(summary, sys.stdout, indent=2, default=str)
         sys.stdout.write("\n")
-        return 0
-    print(
-        f"\naccuracy {100 * s.accuracy:.2f} % (balanced {100 * s.balanced_accuracy:.2f} %) on {s.n} cells\n"
-    )
-    print(format_confusion(s))
-    print(
-        f"\nlabeling took {result.timings['total']:.1f} s "
-        f"(ray casting {result.timings['cast']:.1f} s, features and classification {result.timings['classify']:.1f} s)"
-    )
-    print(
-        f"pictures in {args.out}/: comparison.png (truth | classified), labels.overlay.png, labels.png, map.png"
-    )
-    return 0
+    else:
+        print()
+        for s in summary["steps"]:
+            mark = "ok  " if s["passed"] else "FAIL"
+            why = f"  ({s['failure']})" if s["failure"] else ""
+            print(f"  {mark} {s['book_step']}. {s['step']:<12} {s['text']}{why}")
+        rep = summary.get("replay")
+        if rep:
+            print(
+                f"  {'ok  ' if rep['passed'] else 'FAIL'} replay: the recording gives the same areas"
+                + (f" ({rep.get('failure')})" if not rep["passed"] else "")
+            )
+        t = summary["timings_s"]
+        print(
+            f"\n{'PASSED' if summary['passed'] else 'NOT PASSED'} in {t.get('total', 0):.0f} s "
+            f"(start {t.get('startup', 0):.0f} s, tour {t.get('tour', 0):.0f} s); outputs in {summary['folder']}/: "
+            "transcript.jsonl, tour.mcap, map.png, summary.json, *.log"
+        )
+    return 0 if summary["passed"] or args.interactive else 1

@@ -156,8 +156,9 @@ def _register_robot(sub: Any) -> None:
         "--world",
         metavar="MAP",
         default="gen:0",
-        help="gen:SEED (a generated office), tour:SEED (the guided-tour office), a map_server .yaml or "
-        "an image with --resolution (default: gen:0)",
+        help="gen:SEED (a generated office), tour:SEED (a generated tour office), demo:SEED (the guided "
+        "tour's office, starting at its charging station), a map_server .yaml or an image with "
+        "--resolution (default: gen:0)",
     )
     r.add_argument("--resolution", type=float, help="metres per cell of an image given as --world")
     r.add_argument(
@@ -257,6 +258,15 @@ def _register_robot(sub: Any) -> None:
         "--duration", type=_positive, metavar="S", help="stop after S wall-clock seconds (default: Ctrl-C)"
     )
     r.add_argument("--seed", type=int, default=0, help="random seed for noise and people (default: 0)")
+    r.add_argument(
+        "--tutor",
+        action="store_true",
+        help="with --world demo:SEED: the guided tour's tutor, walking the legs it is told on "
+        "loci/ROBOT/sim/tutor and publishing where it is on loci/ROBOT/sim/tutor/state (docs/demo.md)",
+    )
+    r.add_argument(
+        "--tutor-speed", type=_positive, default=0.6, help="the tutor's walking speed, m/s (default: 0.6)"
+    )
     r.set_defaults(handler=_robot)
 
 
@@ -339,10 +349,19 @@ def _robot(args: argparse.Namespace) -> int:
         seed=args.seed,
     )
     robot = SimRobot(config)
-    return asyncio.run(_run_robot(robot, name, bus, args.duration))
+    tutor = None
+    if args.tutor:
+        from agent.demo.tutor_control import TutorControl
+        from knowledge.errors import ConfigError
+
+        if robot.tour is None:
+            raise ConfigError("--tutor needs the guided tour's world: --world demo:SEED")
+        tutor = TutorControl(robot.tour, speed=args.tutor_speed)
+        tutor.attach(robot)
+    return asyncio.run(_run_robot(robot, name, bus, args.duration, tutor))
 
 
-async def _run_robot(robot: SimRobot, name: str, bus: Any, duration: float | None) -> int:
+async def _run_robot(robot: SimRobot, name: str, bus: Any, duration: float | None, tutor: Any = None) -> int:
     from agent.bus.bridge import BusClosed, subscribe_stream
     from agent.bus.session import bus_session
 
@@ -372,6 +391,8 @@ async def _run_robot(robot: SimRobot, name: str, bus: Any, duration: float | Non
                             robot.send_goal(goal_from_message(msg))
 
             tasks = [asyncio.create_task(obey_commands()), asyncio.create_task(obey_goals())]
+            if tutor is not None:
+                tasks.append(asyncio.create_task(_serve_tutor(session, name, tutor)))
             try:
                 path = robot.start()
                 print(path if path is not None else "-", flush=True)
@@ -408,6 +429,32 @@ async def _run_robot(robot: SimRobot, name: str, bus: Any, duration: float | Non
         file=sys.stderr,
     )
     return 0
+
+
+async def _serve_tutor(session: zenoh.Session, name: str, tutor: Any, period: float = 0.2) -> None:
+    """Obey ``loci/<r>/sim/tutor`` commands and publish the tutor's state every ``period`` s."""
+    import zenoh
+
+    from agent.demo import messages
+
+    def on_cmd(sample: zenoh.Sample) -> None:
+        try:
+            tutor.command(messages.decode(sample.payload.to_bytes()))
+        except ValueError as exc:
+            log.warning("sim/tutor: ignored a command: %s", exc)
+
+    sub = session.declare_subscriber(messages.tutor_cmd_key(name), on_cmd)
+    pub = session.declare_publisher(
+        messages.tutor_state_key(name), encoding=zenoh.Encoding(messages.ENCODING)
+    )
+    try:
+        while True:
+            pub.put(messages.encode(tutor.state()))
+            await asyncio.sleep(period)
+    finally:
+        with contextlib.suppress(zenoh.ZError):
+            sub.undeclare()
+            pub.undeclare()
 
 
 def goal_from_message(msg: dict[str, Any]) -> Goal:

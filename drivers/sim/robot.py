@@ -43,10 +43,10 @@ import math
 import queue
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
@@ -67,6 +67,9 @@ from knowledge.metric.buildings import Building, generate_building, generate_tou
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.metric.raycast import cast
 
+if TYPE_CHECKING:
+    from drivers.sim.tour import TourWorld
+
 log = logging.getLogger(__name__)
 
 Point = tuple[float, float]
@@ -77,6 +80,8 @@ STATUSES = ("idle", "velocity", "route", "active", "reached", "collided", "faile
 MAX_ROUTE_COLLISIONS = 20
 #: A goal fails when not reached within this many seconds plus 3x its length at full speed.
 GOAL_SLACK_S = 30.0
+#: Metres a planned goal's waypoint may be moved to keep clear of obstacles.
+SNAP_DISTANCE = 0.5
 #: Furniture kinds shown to the camera, as catalogue kinds of :mod:`drivers.sim.objects`.
 _PICTURE_KIND = {
     "couch": "couch",
@@ -115,8 +120,10 @@ class SimRobotConfig:
     """Everything a :class:`SimRobot` is made of (see the module docstring).
 
     Attributes:
-        world: ``gen:SEED`` (a generated office), ``tour:SEED`` (the guided-tour office),
-            a map_server ``.yaml`` or an image (with ``resolution`` metres per cell).
+        world: ``gen:SEED`` (a generated office), ``tour:SEED`` (a generated tour office),
+            ``demo:SEED`` (the guided tour's office of :mod:`drivers.sim.tour`, with its
+            objects for the camera, starting at the charging station), a map_server
+            ``.yaml`` or an image (with ``resolution`` metres per cell).
         start: the true start pose ``(x, y, heading)`` in metres and radians; None: the first
             route point, else the middle of a corridor (buildings) or the free cell nearest
             the map centre.
@@ -271,9 +278,31 @@ class RobotSample:
     collisions: int
 
 
+def load_tour(spec: str | None) -> TourWorld | None:
+    """The guided tour's world of a ``demo:SEED`` specification (None for other worlds).
+
+    Raises:
+        MapError: ``demo:`` is not followed by a seed.
+    """
+    if not spec or not spec.startswith("demo:"):
+        return None
+    from drivers.sim.tour import tour_world
+
+    try:
+        seed = int(spec[len("demo:") :])
+    except ValueError:
+        raise MapError(f"world {spec}: after 'demo:' comes a seed, e.g. demo:0") from None
+    if seed < 0:
+        raise MapError(f"world {spec}: the seed must be >= 0")
+    return tour_world(seed)
+
+
 def load_world(spec: str | None, resolution: float | None = None) -> tuple[OccupancyGrid, Building | None]:
     """The grid (and the building, when generated) of a ``world`` specification."""
     spec = spec or "gen:0"
+    tour = load_tour(spec)
+    if tour is not None:
+        return tour.grid, tour.building
     for prefix, make in (("gen:", generate_building), ("tour:", generate_tour_office)):
         if spec.startswith(prefix):
             try:
@@ -285,7 +314,8 @@ def load_world(spec: str | None, resolution: float | None = None) -> tuple[Occup
     path = Path(spec)
     if not path.exists():
         raise MapError(
-            f"world {spec}: no such map file (give a map_server .yaml, an image, gen:SEED or tour:SEED)"
+            f"world {spec}: no such map file (give a map_server .yaml, an image, gen:SEED, tour:SEED "
+            "or demo:SEED)"
         )
     return OccupancyGrid.load(path, resolution), None
 
@@ -315,6 +345,8 @@ class SimRobot:
 
     def __init__(self, config: SimRobotConfig | None = None) -> None:
         self.config = cfg = config or SimRobotConfig()
+        #: the guided tour's world (``demo:SEED``), else None
+        self.tour = load_tour(cfg.world)
         self.grid, self.building = load_world(cfg.world, cfg.resolution)
         if self.building is not None:
             self.planner = RoutePlanner.for_building(self.building)
@@ -323,7 +355,11 @@ class SimRobot:
         self.route = self._make_route()
         start = self._start_pose()
         self.dt = 1.0 / cfg.odom_rate
-        objects = furniture_pictures(self.building) if cfg.camera and self.building is not None else ()
+        objects: tuple[WorldObject, ...] = ()
+        if self.tour is not None:
+            objects = self.tour.objects
+        elif cfg.camera and self.building is not None:
+            objects = furniture_pictures(self.building)
         self.world = SimWorld(self.grid, objects)
         self.base = SimBase(
             self.world,
@@ -409,6 +445,8 @@ class SimRobot:
         cfg = self.config
         if cfg.start is not None:
             return cfg.start
+        if self.tour is not None and self.route is None:
+            return self.tour.start
         if self.route is not None:
             x, y = self.route.start
             return (x, y, self.route.start_heading)
@@ -482,6 +520,19 @@ class SimRobot:
     def cancel(self) -> None:
         """Stop whatever the base is doing."""
         self._commands.put(("cancel", None))
+
+    def add_person(self, legs: Sequence[Leg], on_step: Callable[[RobotSample], None] | None = None) -> None:
+        """Put a person's ``legs`` into the lasers' world (360° scans and the LMS) and call
+        ``on_step`` with every step's sample (on the robot's thread; it must be quick).
+
+        Call before :meth:`start` or from the robot's thread: the lists are not locked.
+        """
+        self.legs.extend(legs)
+        if self.lms is not None:
+            # the LMS's world keeps its own tuple of legs
+            self.lms.world.legs = tuple(self.legs)
+        if on_step is not None:
+            self.sample_listeners.append(on_step)
 
     # ------------------------------------------------------------------ simulation
     def step(self, stamp: float | None = None) -> RobotSample:
@@ -662,6 +713,17 @@ class SimRobot:
             pts = np.column_stack((truth.x + c * d[:, 0] - s * d[:, 1], truth.y + s * d[:, 0] + c * d[:, 1]))
             heading = None if heading is None else heading + dth
         here = np.array([[truth.x, truth.y]])
+        if goal.plan:
+            # waypoints hugging an obstacle (a follower aiming beside a narrow gap, a doorway
+            # node seen through drifted odometry): the nearest points the planner keeps clear
+            # of obstacles, or the base would stop there for fear of a collision
+            pts = pts.copy()
+            # (only nearby: a goal in a wall or off the map still fails)
+            for i, p in enumerate(pts):
+                if float(self.planner.clearance(p)) < self.planner.params.clearance:
+                    q = self.planner.nearest_clear(p)
+                    if math.dist(q, p) <= SNAP_DISTANCE:
+                        pts[i] = q
         try:
             if goal.plan:
                 path = self.planner.plan_through(np.vstack([here, pts])).dense()

@@ -238,6 +238,13 @@ class RoutePlanner:
         t = np.linspace(0.0, 1.0, n)[:, None]
         return float(self.clearance(pa + t * (pb - pa)).min())
 
+    def nearest_clear(self, xy: Sequence[float]) -> Point:
+        """The lattice point nearest to world ``xy``: a point ``params.clearance`` metres from
+        every obstacle (where a goal too near a wall or furniture is moved to)."""
+        p = np.asarray(xy, dtype=np.float64)
+        j = int(np.argmin(np.hypot(*(self._xy - p).T)))
+        return (float(self._xy[j, 0]), float(self._xy[j, 1]))
+
     def space_at(self, xy: Sequence[float]) -> int:
         """The space id at a world point (0: a wall, outside, or no ``spaces`` given)."""
         if self.spaces is None:

@@ -78,7 +78,7 @@ class ScriptLine:
 SCRIPT: tuple[ScriptLine, ...] = (
     ScriptLine("station", 1, "You are at the charging station.", "assert_object"),
     ScriptLine("follow", 2, "Follow me.", "follow_me", walk=("into_room", "false_doorway")),
-    ScriptLine("no_door", 3, "No, there was no door.", "answer", answers=("door",), walk=("to_view",)),
+    ScriptLine("no_door", 3, "No.", "answer", answers=("door",), walk=("to_view",)),
     ScriptLine("stop", 3, "Stop.", "stop"),
     ScriptLine("where", 4, "Where are you?", "ask_place", expect=("room",)),
     ScriptLine("look", 5, "Look around.", "look_around", expect=("couch", "television")),
@@ -267,12 +267,8 @@ class Tutor:
     def attach(self, robot: SimRobot) -> None:
         """Put the tutor into a simulated robot's world: its lasers see the legs, and every
         step of the robot advances the tutor (with the robot's true position)."""
-        robot.legs.extend(self.legs())
-        if robot.lms is not None:
-            # the LMS's world keeps its own tuple of legs, taken when the robot was made
-            robot.lms.world.legs = tuple(robot.legs)
 
         def on_step(sample: RobotSample) -> None:
             self.advance(sample.time, (sample.truth.x, sample.truth.y))
 
-        robot.sample_listeners.append(on_step)
+        robot.add_person(self.legs(), on_step)

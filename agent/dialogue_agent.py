@@ -294,7 +294,9 @@ class DialogueAgent:
         follow_factory: makes a follow-me controller (``agent.follow.FollowMe``); None:
             import ``agent.follow`` when asked (an error reply if it is not there).
         people: whether the scans come with people (``[people] enabled``); follow-me needs them.
-        on_map_changed: called after the dialogue changed the map (a doorway removed).
+        on_map_changed: called after the dialogue changed the map, with the edit
+            (``{"op": "remove_doorway", "node": 13, "reason": ...}``, a ``loci.map_edit/1`` body
+            without its stamps).
         clock: seconds since the epoch.
     """
 
@@ -306,7 +308,7 @@ class DialogueAgent:
         can_recognise: bool = False,
         follow_factory: Callable[[], Any] | None = None,
         people: bool = True,
-        on_map_changed: Callable[[], None] | None = None,
+        on_map_changed: Callable[[dict[str, Any]], None] | None = None,
         clock: Callable[[], float] = time.time,
     ) -> None:
         self.world = world
@@ -719,7 +721,13 @@ class DialogueAgent:
             content["removed"] = q.node
             content["merged"] = [[e.area_id, *e.absorbed] for e in events if isinstance(e, AreasMerged)]
             if self._on_map_changed is not None:
-                self._on_map_changed()
+                self._on_map_changed(
+                    {
+                        "op": "remove_doorway",
+                        "node": q.node,
+                        "reason": f"{q.id}: {intent.get('text') or answer}",
+                    }
+                )
         content["area"] = self.area_view(self.current_area())
         out.append(
             self.say(intent, "answer", "ok", content, text="Thank you, I removed the door from my map.")

@@ -229,6 +229,7 @@ class Agent:
         self._dirty = False
         self._last_save = -math.inf
         self._last_scan_stamp: float | None = None
+        self._last_processed_stamp: float | None = None
         self._process_ms: deque[float] = deque(maxlen=1000)
         self._age_ms: deque[float] = deque(maxlen=1000)
         self._lms: Any = None
@@ -330,6 +331,7 @@ class Agent:
             "people",
             "people/scene",
             "objects",
+            "map/edit",
         ):
             self._pubs[stream] = publish_stream(session, self.robot, stream, stats=self.stats)
         if self.config.laser.source == "lms":
@@ -534,6 +536,7 @@ class Agent:
                         n,
                     )
                 continue
+            self._last_processed_stamp = m.scan.stamp
             self._process_ms.append((time.perf_counter() - t0) * 1e3)
             self._age_ms.append((time.time() - result.stamp) * 1e3)
 
@@ -686,8 +689,20 @@ class Agent:
     def _send(self, out: Outgoing) -> None:
         self._pubs[out.stream].put(out.message)
 
-    def _map_changed(self) -> None:
-        """The dialogue changed the map (a false doorway removed): publish it, save it soon."""
+    def _map_changed(self, edit: dict[str, Any]) -> None:
+        """The dialogue changed the map (a false doorway removed): say so on ``map/edit`` (a
+        recording keeps it, so a replay makes the same change after the same scan), publish
+        the new map, save it soon."""
+        message = {
+            "schema": "loci.map_edit/1",
+            "stamp": time.time(),
+            **edit,
+            "after_scan": self._last_processed_stamp,
+        }
+        try:
+            self._pubs["map/edit"].put(message)
+        except Exception:  # the map changed all the same; a replay will miss the edit
+            log.exception("publishing the map edit %s failed", edit)
         self._publish_state(time.time())
         self._dirty = True
 

@@ -221,8 +221,8 @@ def test_a_false_doorway_is_asked_about_once_and_no_removes_it() -> None:
     g = NavigationGraph(GraphParams(node_distance=1.0))
     areas = AreaMap()
     world = World(g, areas)
-    changed: list[int] = []
-    agent, _ = agent_for(world, on_map_changed=lambda: changed.append(g.revision))
+    changed: list[dict[str, Any]] = []
+    agent, _ = agent_for(world, on_map_changed=changed.append)
     drive(g, [(0.0, 0.0), (6.0, 0.0)], doors=[((3.0, 0.0), 0.0)])
     agent.on_area_events(areas.update(g))
     assert not [o for o in asyncio.run(agent.tick()) if o.stream == "dialogue/ask"]
@@ -245,7 +245,9 @@ def test_a_false_doorway_is_asked_about_once_and_no_removes_it() -> None:
     assert reply["status"] == "error" and "yes or no" in reply["reason"]
     reply, _ = handle(agent, intent("answer", answer="No"))
     assert reply["status"] == "ok" and reply["content"]["removed"] == door
-    assert door not in g and changed and g.doorway_nodes() == [] and len(areas.areas) == 1
+    assert door not in g and g.doorway_nodes() == [] and len(areas.areas) == 1
+    assert changed == [{"op": "remove_doorway", "node": door, "reason": changed[0]["reason"]}]
+    assert ask["id"] in changed[0]["reason"]
     assert not [o for o in asyncio.run(agent.tick()) if o.stream == "dialogue/ask"]
     reply, _ = handle(agent, intent("answer", answer="no"))
     assert reply["status"] == "error"  # nothing is open any more

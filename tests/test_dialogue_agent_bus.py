@@ -102,7 +102,7 @@ def test_the_agent_answers_refuses_plans_and_asks_about_a_false_doorway(tmp_path
                 "state": {"dir": str(tmp_path / "state"), "save_interval": 0.2},
             }
             cfg = load_config(table=table, env={})
-            heard = Heard(session, ["dialogue/say", "dialogue/ask", "base/goal", "graph"])
+            heard = Heard(session, ["dialogue/say", "dialogue/ask", "base/goal", "graph", "map/edit"])
             stop, ready = asyncio.Event(), asyncio.Event()
             agent = Agent(cfg, model=model, on_ready=lambda _: ready.set())
             run = asyncio.create_task(agent.run(stop))
@@ -166,6 +166,10 @@ def test_the_agent_answers_refuses_plans_and_asks_about_a_false_doorway(tmp_path
                 r = await reply(say("answer", answer="no", question=ask["id"]))
                 assert r["status"] == "ok" and r["content"]["removed"] == ids["bucket"]
                 await heard.wait("graph", lambda m: all(node["id"] != ids["bucket"] for node in m["nodes"]))
+                # ... and says so for recordings, so that a replay makes the same change
+                edit = await heard.wait("map/edit", lambda m: True)
+                SCHEMAS.validate(edit, "loci.map_edit/1")
+                assert edit["op"] == "remove_doorway" and edit["node"] == ids["bucket"]
                 (state,) = await asyncio.to_thread(query_state, session, f"loci/{ROBOT}/state/areas", 3.0)
                 assert state.value is not None
                 rooms = [a for a in state.value["areas"] if ids["near"][0] in a["nodes"]]

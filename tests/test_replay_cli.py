@@ -215,3 +215,32 @@ def test_errors_say_what_is_wrong(tmp_path: Path) -> None:
     not_mcap.write_text("hello")
     out = loci("replay", str(not_mcap))
     assert out.returncode == 2 and "not an MCAP file" in out.stderr
+
+
+def test_map_edits_that_do_not_fit_or_do_not_decode_change_nothing(
+    tmp_path: Path, run: Run, model: PlaceModel
+) -> None:
+    """A recorded map edit naming a place node (only doorways can be removed) is counted as not
+    fitting; a malformed one is left out; the map is the one the scans make."""
+    rec = tmp_path / "run.mcap"
+    write_recording(rec, run)
+    want = expected(model, run)
+    place = next(iter(want.graph.place_nodes())).id
+    after = run.scans[5].stamp
+    edits = [
+        {"schema": "loci.map_edit/1", "op": "remove_doorway", "node": place, "after_scan": after},
+        {"schema": "loci.map_edit/1", "op": "paint_it_red", "node": place, "after_scan": after},
+    ]
+    with McapSink(tmp_path / "edits.mcap") as sink:
+        for m in McapMessages(rec):
+            sink.write(RawSample(m.topic, m.data, m.zenoh_encoding, m.log_time_ns))
+            if m.topic.endswith("/scan") and m.log_time_ns >= int((after + 0.008) * 1e9) and edits:
+                for e in edits:
+                    data = json.dumps(e).encode()
+                    sink.write(
+                        RawSample(f"loci/{ROBOT}/map/edit", data, "application/json", m.log_time_ns + 1)
+                    )
+                edits = []
+    out = replay_recording(tmp_path / "edits.mcap", model=model)
+    assert out.edits == 0 and out.edits_failed == 1
+    assert sorted(out.pipeline.graph.nodes) == sorted(want.graph.nodes)

@@ -142,6 +142,13 @@ STREAMS: dict[str, StreamSpec] = {
             "objects the camera recognised, with the node and area they were seen from",
         ),
         StreamSpec(
+            "map/edit",
+            "loci.map_edit/1",
+            "agent → all",
+            Policy.WAIT,
+            "a change of the map made by the dialogue (a doorway removed); replay applies it again",
+        ),
+        StreamSpec(
             "sim/truth",
             "loci.truth/1",
             "simulator → evaluation",

@@ -796,5 +796,28 @@ CONCEPTS = MessageSchema(
     description="the conceptual map: areas with their classes, types, names and objects",
 )
 
-for _schema in (PEOPLE, OBJECTS, CONCEPTS):
+#: What a ``loci.map_edit/1`` can do to the map.
+MAP_EDIT_OPS = ("remove_doorway",)
+
+MAP_EDIT = MessageSchema(
+    "loci.map_edit",
+    1,
+    obj(
+        {
+            "op": string(choices=MAP_EDIT_OPS),
+            "node": integer(minimum=0, description="the navigation node concerned"),
+            "after_scan": number(
+                nullable=True,
+                description="the stamp of the last scan processed before the edit (none: before any)",
+            ),
+        },
+        {
+            "stamp": _STAMP,
+            "reason": string(max_length=400, description="why, e.g. the answer to 'Was there a door here?'"),
+        },
+    ),
+    description="a change of the map that scans do not explain (the tutor said a doorway was none)",
+)
+
+for _schema in (PEOPLE, OBJECTS, CONCEPTS, MAP_EDIT):
     SCHEMAS.register(_schema)

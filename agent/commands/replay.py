@@ -9,6 +9,10 @@ the initial map (a resumed run), the pipeline parameters, the model's path and h
 the odometry timeouts; the replay uses them, so it produces the graph and areas the live
 run ended with. The live run's last diagnostics message (``extra.final``) names the last
 scan it fed; later scans in the file (recorded while the agent was stopping) are skipped.
+Changes of the map that scans do not explain — a doorway the tutor said was none — are
+recorded as ``loci/<robot>/map/edit`` (``loci.map_edit/1``, naming the last scan processed
+before the change); the replay makes each one again right after that scan, so a tour with a
+clarification dialogue replays to the same map.
 
 Messages that do not decode are counted and skipped, as the live subscriptions do. A file
 whose writer crashed is replayed up to its last complete message, and the output says so.
@@ -19,8 +23,10 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import struct
 import sys
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -76,6 +82,7 @@ class ReplayOutcome:
         truncated: the file ended without its footer (the writer crashed).
         live: the live run's final counters, if the recording has them.
         sync: the odometry association's counters.
+        edits, edits_failed: recorded map edits made again, and those that did not fit.
     """
 
     pipeline: Any
@@ -85,6 +92,8 @@ class ReplayOutcome:
     invalid: int = 0
     skipped: int = 0
     errors: int = 0
+    edits: int = 0
+    edits_failed: int = 0
     truncated: bool = False
     resumed: bool = False
     live: dict[str, Any] | None = None
@@ -98,6 +107,8 @@ class ReplayOutcome:
             "invalid": self.invalid,
             "skipped": self.skipped,
             "errors": self.errors,
+            "edits": self.edits,
+            "edits_failed": self.edits_failed,
             "processed": self.pipeline.scans,
             "truncated": self.truncated,
             "resumed": self.resumed,
@@ -131,16 +142,24 @@ def read_recording_metadata(path: Path) -> dict[str, str]:
     return {}
 
 
-def _survey(path: Path) -> tuple[set[str], dict[str, dict[str, Any]]]:
-    """A first pass: the topics, and the last ``extra.final`` of each diagnostics topic."""
+def _survey(path: Path) -> tuple[set[str], dict[str, dict[str, Any]], dict[str, list[dict[str, Any]]]]:
+    """A first pass: the topics, the last ``extra.final`` of each diagnostics topic, and the
+    map edits of each ``map/edit`` topic (in file order; invalid ones are logged and left out)."""
     from agent.bus.schemas import SCHEMAS
     from agent.recording.replay import McapMessages
     from knowledge.errors import ProtocolError
 
     topics: set[str] = set()
     finals: dict[str, dict[str, Any]] = {}
+    edits: dict[str, list[dict[str, Any]]] = {}
     for msg in McapMessages(path):
         topics.add(msg.topic)
+        if msg.topic.endswith("/map/edit"):
+            try:
+                edits.setdefault(msg.topic, []).append(SCHEMAS.decode(msg.data, "loci.map_edit/1"))
+            except ProtocolError as exc:
+                log.warning("%s: a map edit on %s is invalid and is not replayed: %s", path, msg.topic, exc)
+            continue
         if msg.topic.endswith("/diagnostics"):
             try:
                 doc = SCHEMAS.decode(msg.data, "loci.diagnostics/1")
@@ -149,7 +168,7 @@ def _survey(path: Path) -> tuple[set[str], dict[str, dict[str, Any]]]:
             final = doc.get("extra", {}).get("final")
             if isinstance(final, dict):
                 finals[msg.topic] = final
-    return topics, finals
+    return topics, finals, edits
 
 
 def replay_recording(
@@ -186,7 +205,7 @@ def replay_recording(
 
     p = Path(path)
     meta = read_recording_metadata(p)
-    topics, finals = _survey(p)
+    topics, finals, all_edits = _survey(p)
     robot = robot or meta.get("robot")
     if not robot:
         robots = sorted({t.split("/")[1] for t in topics if t.startswith("loci/") and t.endswith("/scan")})
@@ -231,8 +250,24 @@ def replay_recording(
     out = ReplayOutcome(pipeline=pipeline, resumed=outcome_resumed, live=live)
     replay = Replay(p, speed=speed, topics={keys.scan, keys.odom})
 
+    edits = deque(sorted(all_edits.get(keys.stream("map/edit"), []), key=_edit_order))
+
+    def apply_edits(up_to: float | None) -> None:
+        """Make the edits made after the scans up to ``up_to`` (a scan stamp; None: no scan yet)."""
+        limit = -math.inf if up_to is None else up_to
+        while edits and _edit_order(edits[0])[0] <= limit:
+            edit = edits.popleft()
+            if _apply_edit(pipeline, edit):
+                out.edits += 1
+            else:
+                out.edits_failed += 1
+                log.warning("%s: map edit %s does not fit the replayed map; not applied", p, edit)
+
+    apply_edits(None)  # edits made before any scan was processed
+
     def feed(matched: list[Any]) -> None:
         for m in matched:
+            apply_edits(pipeline.last_stamp)
             try:
                 pipeline.process(m.scan, m.pose)
             except Exception:  # as the live agent does: the scan is skipped
@@ -260,9 +295,30 @@ def replay_recording(
         out.scans += 1
         feed(sync.add_scan(scan, now))
     sync.close()
+    apply_edits(pipeline.last_stamp)
+    if edits:
+        log.warning("%s: %d map edits came after the last replayed scan; not applied", p, len(edits))
+        out.edits_failed += len(edits)
     out.truncated = replay.truncated
     out.sync = sync.stats.as_dict()
     return out
+
+
+def _edit_order(edit: dict[str, Any]) -> tuple[float, float]:
+    after = edit["after_scan"]
+    return (-math.inf if after is None else float(after), float(edit.get("stamp") or 0.0))
+
+
+def _apply_edit(pipeline: Any, edit: dict[str, Any]) -> bool:
+    """Make one ``loci.map_edit/1`` on the pipeline's map; False when it does not apply."""
+    from knowledge.navigation.consistency import remove_doorway
+    from knowledge.navigation.graph import PLACE
+
+    node = edit["node"]
+    if edit["op"] == "remove_doorway" and node in pipeline.graph and pipeline.graph.node(node).kind != PLACE:
+        remove_doorway(pipeline.graph, pipeline.areas, node)
+        return True
+    return False
 
 
 def _replay(args: argparse.Namespace) -> int:
@@ -304,6 +360,8 @@ def _replay(args: argparse.Namespace) -> int:
         f"{len(pipeline.graph)} nodes, {len(pipeline.areas.areas)} areas"
         + (" (continuing the map the live run resumed)" if res.resumed else "")
         + (f"; {res.skipped} scans after the live run's last one skipped" if res.skipped else "")
+        + (f"; {res.edits} map edits made again" if res.edits else "")
+        + (f" ({res.edits_failed} did not fit)" if res.edits_failed else "")
     )
     if args.json:
         print(json.dumps({"graph": graph, "areas": areas, "stats": res.stats(), "truncated": res.truncated}))

@@ -36,6 +36,8 @@ import uuid
 from types import FrameType
 from typing import TYPE_CHECKING, Any
 
+from agent.commands.options import add_bus_options, positive_float
+
 if TYPE_CHECKING:
     import zenoh
 
@@ -63,16 +65,6 @@ def _route(text: str) -> tuple[tuple[float, float], ...]:
     if not pts:
         raise argparse.ArgumentTypeError(f"a route is X,Y;X,Y;... in metres (map frame); got {text!r}")
     return pts
-
-
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = -1.0
-    if not (value > 0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
-    return value
 
 
 def register(subparsers: Any) -> None:
@@ -133,7 +125,6 @@ def register(subparsers: Any) -> None:
 
 
 def _register_robot(sub: Any) -> None:
-    from agent.bus.session import DEFAULT_AGENT_ENDPOINT
     from agent.commands.sick import parse_variant
 
     r = sub.add_parser(
@@ -161,24 +152,7 @@ def _register_robot(sub: Any) -> None:
         "--resolution (default: gen:0)",
     )
     r.add_argument("--resolution", type=float, help="metres per cell of an image given as --world")
-    r.add_argument(
-        "--robot", help="the robot's name, the second chunk of its keys (default: this host's name)"
-    )
-    r.add_argument(
-        "--connect",
-        metavar="ENDPOINT",
-        action="append",
-        help=f"a Zenoh endpoint to connect to, repeatable (default: {DEFAULT_AGENT_ENDPOINT}, the agent's)",
-    )
-    r.add_argument(
-        "--listen",
-        metavar="ENDPOINT",
-        action="append",
-        help="an endpoint to accept connections on, repeatable (default: tcp/127.0.0.1:0, a free port)",
-    )
-    r.add_argument(
-        "--mode", choices=("peer", "client"), default="peer", help="peer (default) or client of a router"
-    )
+    add_bus_options(r, mode=True)
     r.add_argument(
         "--laser",
         choices=("front", "360"),
@@ -203,18 +177,20 @@ def _register_robot(sub: Any) -> None:
         "--units", choices=("cm", "mm"), default="cm", help="LMS measured-value units (default: cm)"
     )
     r.add_argument(
-        "--lms-rate", type=_positive, help="LMS scans per second (default: the variant's, 37.5 Hz)"
+        "--lms-rate", type=positive_float, help="LMS scans per second (default: the variant's, 37.5 Hz)"
     )
     r.add_argument("--beams", type=int, default=360, help="beams of the 360° laser (default: 360)")
     r.add_argument(
-        "--scan-rate", type=_positive, default=10.0, help="360° scans per simulated second (default: 10)"
+        "--scan-rate", type=positive_float, default=10.0, help="360° scans per simulated second (default: 10)"
     )
     r.add_argument(
         "--noise", type=float, default=0.01, help="range noise standard deviation, metres (default: 0.01)"
     )
     r.add_argument("--people", type=int, default=0, help="people walking near the start (default: 0)")
     r.add_argument("--camera", action="store_true", help="publish JPEG camera frames on loci/ROBOT/camera")
-    r.add_argument("--camera-rate", type=_positive, default=2.0, help="camera frames per second (default: 2)")
+    r.add_argument(
+        "--camera-rate", type=positive_float, default=2.0, help="camera frames per second (default: 2)"
+    )
     r.add_argument(
         "--start",
         type=_pose,
@@ -230,13 +206,13 @@ def _register_robot(sub: Any) -> None:
     r.add_argument("--loop", action="store_true", help="drive the route or tour again and again")
     r.add_argument(
         "--speed",
-        type=_positive,
+        type=positive_float,
         default=1.0,
         help="simulated seconds per wall-clock second (default: 1, real time)",
     )
     r.add_argument(
         "--odom-rate",
-        type=_positive,
+        type=positive_float,
         default=50.0,
         help="odometry samples per simulated second (default: 50)",
     )
@@ -250,12 +226,15 @@ def _register_robot(sub: Any) -> None:
     )
     r.add_argument(
         "--cmd-timeout",
-        type=_positive,
+        type=positive_float,
         default=1.0,
         help="stop when no velocity command came for this many simulated seconds (default: 1)",
     )
     r.add_argument(
-        "--duration", type=_positive, metavar="S", help="stop after S wall-clock seconds (default: Ctrl-C)"
+        "--duration",
+        type=positive_float,
+        metavar="S",
+        help="stop after S wall-clock seconds (default: Ctrl-C)",
     )
     r.add_argument("--seed", type=int, default=0, help="random seed for noise and people (default: 0)")
     r.add_argument(
@@ -265,7 +244,10 @@ def _register_robot(sub: Any) -> None:
         "loci/ROBOT/sim/tutor and publishing where it is on loci/ROBOT/sim/tutor/state (docs/demo.md)",
     )
     r.add_argument(
-        "--tutor-speed", type=_positive, default=0.6, help="the tutor's walking speed, m/s (default: 0.6)"
+        "--tutor-speed",
+        type=positive_float,
+        default=0.6,
+        help="the tutor's walking speed, m/s (default: 0.6)",
     )
     r.set_defaults(handler=_robot)
 

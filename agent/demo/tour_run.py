@@ -397,23 +397,21 @@ def _area_sets(areas_doc: Mapping[str, Any] | None) -> list[tuple[str, tuple[int
 def replay_check(
     mcap: Path, final: Mapping[str, Any], steps: list[StepOutcome], out_dir: Path
 ) -> dict[str, Any]:
-    """Replay the recording with ``loci replay`` and compare its areas with the live run's.
+    """Replay the recording with ``loci replay`` and compare its map with the live run's.
 
-    The replay runs the pipeline on the recorded scans and odometry; it does not know the
-    tutor's answers, so the doorway the tutor said was no door is removed from the replayed
-    map the same way the agent removed it (:func:`knowledge.navigation.consistency.remove_doorway`)
-    before the areas are compared (class and node set of each area).
+    The replay runs the pipeline on the recorded scans and odometry and makes the recorded
+    map edits again (the doorway the tutor said was none, ``loci/<r>/map/edit``), so its
+    areas (class and node set of each) and doorway nodes must be the live run's.
     """
     import subprocess
 
     from agent.pipeline import areas_message
     from knowledge.navigation import persistence
-    from knowledge.navigation.consistency import remove_doorway
 
     shutil.rmtree(out_dir, ignore_errors=True)
     t0 = time.monotonic()
     proc = subprocess.run(
-        [sys.executable, "-m", "agent.cli", "-q", "replay", str(mcap), "--out-dir", str(out_dir)],
+        [sys.executable, "-m", "agent.cli", "-q", "replay", str(mcap), "--out-dir", str(out_dir), "--json"],
         capture_output=True,
         text=True,
         timeout=600,
@@ -425,6 +423,7 @@ def replay_check(
             "failure": f"loci replay failed: {proc.stderr.strip()[-500:]}",
             "seconds": seconds,
         }
+    stats = json.loads(proc.stdout.strip().splitlines()[-1])["stats"]
     doc = json.loads((out_dir / "navgraph.json").read_text(encoding="utf-8"))
     removed = [
         int(s.evidence["removed"])
@@ -434,19 +433,23 @@ def replay_check(
     graph, areas = persistence.from_document(doc)
     if areas is None:
         return {"passed": False, "failure": "the replay made no areas", "seconds": round(seconds, 2)}
-    for node in removed:
-        if node in graph and graph.node(node).kind == "doorway":
-            remove_doorway(graph, areas, node)
     replayed = areas_message(persistence.to_document(graph, areas), 0.0)
     live = final.get("areas")
-    same = _area_sets(replayed) == _area_sets(live)
+    live_doors = sorted(
+        n["id"] for n in (final.get("graph") or {}).get("nodes", []) if n["kind"] == "doorway"
+    )
+    replayed_doors = sorted(n.id for n in graph.doorway_nodes())
+    same = _area_sets(replayed) == _area_sets(live) and replayed_doors == live_doors
     result: dict[str, Any] = {
         "passed": same,
         "seconds": round(seconds, 2),
         "removed_doorways": removed,
+        "edits_replayed": stats.get("edits", 0),
+        "edits_failed": stats.get("edits_failed", 0),
         "live": [[c, len(n)] for c, n in _area_sets(live)],
         "replayed": [[c, len(n)] for c, n in _area_sets(replayed)],
+        "doorways": {"live": live_doors, "replayed": replayed_doors},
     }
     if not same:
-        result["failure"] = "the replayed areas differ from the live run's"
+        result["failure"] = "the replayed map (areas, doorways) differs from the live run's"
     return result

@@ -355,10 +355,14 @@ def tour_world(seed: int = 0) -> TourWorld:
     mid_gap = (table[2] + gap / 2, table_y)
     inside = (door_x, y_rooms + 0.9)
     # the loop: west of the door to below the gap, north through it, east above the bucket,
-    # south past the bucket's east side, back towards the node inside the door
+    # south past the bucket's east side, back past the node inside the door and on along the
+    # way in to beyond the point below the gap: the robot, 1 m behind, then drives over the
+    # places it passed on the way in, so the loop round the bucket closes on known nodes
     below = (mid_gap[0], table[1] - 0.8)
     above = (mid_gap[0], table[3] + 0.7)
     east = bucket_c[0] + bucket_w / 2 + 0.85
+    back = (door_x + 0.1, inside[1] + 0.1)
+    beyond = (below[0] - 0.9, below[1] + 0.2)
     legs = (
         TourLeg(
             "into_room",
@@ -367,12 +371,12 @@ def tour_world(seed: int = 0) -> TourWorld:
         ),
         TourLeg(
             "false_doorway",
-            (below, above, (east, above[1]), (east, below[1]), (door_x + 0.1, inside[1] + 0.1)),
-            "between the table and the bucket, round the bucket and back",
+            (below, above, (east, above[1]), (east, below[1]), back, below, beyond),
+            "between the table and the bucket, round the bucket and back the way we came in",
         ),
         TourLeg(
             "to_view",
-            ((door_x + 0.1, inside[1] + 0.1), (lx1 - 1.0, inside[1] + 0.3)),
+            (beyond, (lx1 - 1.0, inside[1] + 0.3)),
             "into the open half of the room, in front of the couch and the television",
         ),
     )

@@ -18,10 +18,13 @@ Behaviour:
   goal is only handed out when it differs from the last one (from the robot's pose before
   the first) by more than ``tolerance`` metres or ``heading_tolerance`` radians, so the
   base is not re-planned for every centimetre of tracker noise.
-* When the target's track disappears (the tracker deleted it, e.g. after an occlusion),
-  a new confirmed track seen within ``reacquire_radius`` metres of the target's
-  constant-velocity prediction (extrapolated at most ``max_prediction`` seconds) takes
-  over as the target — the same person under a new id.
+* When the target's track disappears (the tracker deleted it, e.g. after an occlusion:
+  the person turned round a door jamb), the robot drives to where it last saw them, up to
+  ``chase_short`` metres short of that point (once per disappearance), so that it looks
+  round the corner; a new confirmed track seen within ``reacquire_radius`` metres of the
+  target's constant-velocity prediction (extrapolated at most ``max_prediction`` seconds),
+  plus ``search_speed`` metres per second since the target was last seen, takes over as the
+  target — the same person under a new id.
 * When the target has not been seen for ``lost_after`` seconds → **lost**: no goal,
   ``cancel`` once (the base should stop) and the message ``"I lost you."`` once. Lost is
   final until :meth:`FollowMe.start` is called again.
@@ -64,6 +67,9 @@ class FollowParams:
             is taken for the same person (> 0).
         max_prediction: seconds: the prediction of a vanished target stops moving after this (>= 0).
         search_for: seconds of searching without a target before giving up (> 0).
+        chase_short: metres short of the vanished target's last position to drive to (>= 0).
+        search_speed: m/s: how fast the reacquisition radius grows while the target is
+            unseen (>= 0; a walking person who turned a corner is that far by now).
     """
 
     distance: float = 1.0
@@ -75,13 +81,15 @@ class FollowParams:
     reacquire_radius: float = 0.8
     max_prediction: float = 1.0
     search_for: float = 5.0
+    chase_short: float = 0.5
+    search_speed: float = 0.6
 
     def __post_init__(self) -> None:
         for name in ("distance", "lost_after", "max_range", "reacquire_radius", "search_for"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
                 raise ValueError(f"FollowParams.{name} must be a positive number, got {v!r}")
-        for name in ("tolerance", "heading_tolerance", "max_prediction"):
+        for name in ("tolerance", "heading_tolerance", "max_prediction", "chase_short", "search_speed"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
                 raise ValueError(f"FollowParams.{name} must be a number >= 0, got {v!r}")
@@ -146,6 +154,7 @@ class FollowMe:
         self._last_vel = np.zeros(2)
         self._goal: Pose | None = None
         self._stamp: float | None = None
+        self._chased = False  # drove to the vanished target's last position already
 
     @property
     def active(self) -> bool:
@@ -212,8 +221,15 @@ class FollowMe:
             self._last_seen = float(stamp)
         if stamp - self._last_seen >= self.params.lost_after:
             return self._lose(LOST_MESSAGE)
-        if track is None:  # vanished, maybe back soon: keep the last goal
-            return FollowStep(None, "following", self._target)
+        if track is None:  # vanished, maybe round a corner: go and look where they were last
+            if self._chased:
+                return FollowStep(None, "following", self._target)
+            self._chased = True
+            last = (float(self._last_pos[0]), float(self._last_pos[1]))
+            chase = goal_behind(last, pose, self.params.chase_short)
+            self._goal = chase
+            return FollowStep(chase, "following", self._target)
+        self._chased = False
         self._last_pos = np.asarray(track.position, dtype=np.float64).copy()
         self._last_vel = np.asarray(track.velocity, dtype=np.float64).copy()
         goal = goal_behind((float(track.position[0]), float(track.position[1])), pose, self.params.distance)
@@ -251,7 +267,8 @@ class FollowMe:
         dt = min(max(0.0, stamp - self._last_seen), self.params.max_prediction)
         predicted = self._last_pos + dt * self._last_vel
         best: TrackState | None = None
-        best_d = self.params.reacquire_radius
+        unseen = min(max(0.0, stamp - self._last_seen), self.params.lost_after)
+        best_d = self.params.reacquire_radius + self.params.search_speed * unseen
         for t in tracks:
             if t.misses > 0 or t.first_seen < self._last_seen:
                 continue  # only tracks born after the target was last seen can be it

@@ -174,7 +174,11 @@ def test_lost_after_the_timeout_says_so_once_and_stays_lost() -> None:
     f = started(lost_after=2.0)
     for k in range(1, 11):
         f.update([track(1, 2.0, 0.0)], ORIGIN, 0.1 * k)  # last seen at t = 1.0
-    for t in np.arange(1.1, 2.95, 0.1):
+    # vanished: once, go and look where they were last seen (chase_short = 0.5 m short of it)
+    step = f.update([], ORIGIN, 1.1)
+    assert (step.state, step.target_track, step.message) == ("following", 1, None)
+    assert step.goal == pytest.approx((1.5, 0.0, 0.0))
+    for t in np.arange(1.2, 2.95, 0.1):
         step = f.update([], ORIGIN, float(t))
         assert (step.state, step.target_track, step.goal, step.message) == ("following", 1, None, None)
     step = f.update([], ORIGIN, 3.0)
@@ -205,6 +209,16 @@ def test_reacquires_a_new_track_near_the_predicted_position() -> None:
     assert (step.state, step.target_track) == ("following", 5)  # predicted (2.8, 0)
     step = f.update([track(5, 3.0, 0.0)], ORIGIN, 4.0)
     assert step.state == "following"  # seen again: the lost clock restarted
+
+
+def test_the_reacquisition_radius_grows_while_the_target_is_unseen() -> None:
+    """A person who turned a corner reappears farther from the prediction the longer it took."""
+    f = started(lost_after=3.0, reacquire_radius=0.8, search_speed=0.6, max_prediction=0.0)
+    f.update([track(1, 2.0, 0.0)], ORIGIN, 1.0)  # last seen at (2, 0), t = 1.0
+    early = track(2, 2.0, 1.3, first_seen=1.1)  # 1.3 m away, 0.2 s later: radius 0.92 m
+    assert f.update([early], ORIGIN, 1.2).target_track == 1
+    late = track(3, 2.0, 1.3, first_seen=2.4)  # the same place, 1.5 s later: radius 1.7 m
+    assert f.update([late], ORIGIN, 2.5).target_track == 3
 
 
 def test_a_new_track_far_from_the_prediction_is_not_the_target() -> None:

@@ -36,6 +36,13 @@ BENCHMARKS: list[tuple[str, str, list[str], str]] = [
     ("sick", "agent.tools.bench_sick", [], "SICK telegram codec vs the 500 kbaud line rate"),
     ("people", "agent.tools.bench_people", [], "leg detection per 768-beam scan vs 75 Hz"),
     (
+        "conceptual",
+        "agent.tools.bench_conceptual",
+        [],
+        "the conceptual map: a new object to the inferred room type (target ≤ 2 s), answers from the cache (≤ 100 ms)",
+    ),
+    ("objects", "agent.tools.bench_objects", [], "object recognition: rendered views of the tour's objects"),
+    (
         "agent",
         "agent.tools.bench_agent",
         [],
@@ -44,7 +51,7 @@ BENCHMARKS: list[tuple[str, str, list[str], str]] = [
 ]
 
 #: benchmarks whose --json takes a file (the others print JSON with --json)
-JSON_FILE = {"raycast", "features", "labeling", "boosting", "topology", "agent"}
+JSON_FILE = {"raycast", "features", "labeling", "boosting", "topology", "agent", "conceptual", "objects"}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -126,13 +126,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--json", nargs="?", const="-", metavar="FILE", help="print JSON (or write it to FILE)")
     args = ap.parse_args(argv)
     r = run(args.repeat, args.areas, args.debounce)
-    if args.json:
-        text = json.dumps(r, indent=1)
-        if args.json == "-":
-            print(text)
-        else:
-            atomic_write_text(args.json, text + "\n")
+    if args.json == "-":
+        print(json.dumps(r, indent=1))
         return 0
+    if args.json:
+        atomic_write_text(args.json, json.dumps(r, indent=1) + "\n")
     print(f"Conceptual map: {r['areas']} areas, {r['objects']} objects, debounce {r['debounce_s']} s")
     print(f"  service start (Java check, ontology load): {r['start_s']} s")
     for key, what in (

@@ -136,3 +136,27 @@ def test_children_are_stopped_even_when_they_ignore_sigint(tmp_path: Path) -> No
         assert time.monotonic() - t0 < 5.0
     assert stubborn.poll() is not None
     assert "usage: loci" in (tmp_path / "sleeper.log").read_text()
+
+
+def test_interactive_mode_takes_the_tutors_lines_from_the_console(tmp_path: Path) -> None:
+    """``loci demo --interactive``: typed lines reach the agent through the dialogue process and
+    the robot's answers are printed; end of input ends the demo cleanly (nothing is checked)."""
+    import json
+    import subprocess
+
+    out = tmp_path / "tour"
+    proc = subprocess.run(
+        [sys.executable, "-m", "agent.cli", "demo", "--interactive", "--no-replay", "--out", str(out)],
+        input="You are at the charging station.\nWhere are you?\n:quit\n",
+        capture_output=True,
+        text=True,
+        timeout=240,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    printed = proc.stdout + proc.stderr  # the conversation goes to stderr, the summary to stdout
+    assert "robot: Thank you. This is the charging station." in printed, printed
+    assert "DONE (interactive" in proc.stdout
+    lines = [json.loads(x) for x in (out / "transcript.jsonl").read_text().splitlines()]
+    said = [x["text"] for x in lines if x.get("speaker") == "robot"]
+    assert any(t.startswith("I am in ") for t in said), said  # "Where are you?" was answered
+    assert (out / "map.png").is_file() and (out / "tour.mcap").is_file()

@@ -93,8 +93,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
                 + (f" ({rep.get('failure')})" if not rep["passed"] else "")
             )
         t = summary["timings_s"]
+        verdict = (
+            "DONE (interactive: nothing is checked)"
+            if args.interactive
+            else ("PASSED" if summary["passed"] else "NOT PASSED")
+        )
         print(
-            f"\n{'PASSED' if summary['passed'] else 'NOT PASSED'} in {t.get('total', 0):.0f} s "
+            f"\n{verdict} in {t.get('total', 0):.0f} s "
             f"(start {t.get('startup', 0):.0f} s, tour {t.get('tour', 0):.0f} s); outputs in {summary['folder']}/: "
             "transcript.jsonl, tour.mcap, map.png, summary.json, *.log"
         )

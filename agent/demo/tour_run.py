@@ -347,9 +347,18 @@ async def _interactive(conv: Conversation, tour: Any, screen: Screen) -> list[St
             except (ValueError, IndexError) as exc:
                 screen.line(f"  cannot walk {arg!r}: {exc}; the legs are {[leg.name for leg in tour.legs]}")
             continue
-        conv.say(text)
+        # one exchange at a time, as with a person: the line's intent, then its reply (a line
+        # said before the bus's routes settled is said once more, as the scripted tour does)
+        intent = await conv.wait_intent(conv.say(text), text, 5.0)
+        if intent is None:
+            intent = await conv.wait_intent(conv.say(text), text, 5.0)
+        if intent is None:
+            screen.line("  (no intent: the dialogue process did not understand that; see dialogue.log)")
+            continue
         if "follow me" in text.lower() and legs:
             conv.walk(legs.pop(0))
+        if await conv.wait_reply(str(intent.message["id"]), 15.0) is None:
+            screen.line("  (the robot did not answer within 15 s)")
     return []
 
 

@@ -548,9 +548,10 @@ class DialogueAgent:
             raise LociError("I do not know where I am yet; let me drive a little first.")
         return node, area
 
-    async def _tell(self, fn: Callable[[Any], Any]) -> None:
-        await self.concepts.submit(fn)
+    async def _tell(self, fn: Callable[[Any], Any]) -> Any:
+        result = await self.concepts.submit(fn)
         self.concepts.request_reasoning()
+        return result
 
     async def _on_ask_place(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:
         area = self.area_view(self.current_area())
@@ -574,8 +575,74 @@ class DialogueAgent:
     async def _on_assert_type(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:
         _, area = self._here()
         word, speaker = str(args["type"]), str(intent.get("speaker", "tutor"))
-        await self._tell(lambda m: m.assert_type(area, word, speaker))
-        return [self.say(intent, "assert_type", "ok", {"area": self.area_view(area)})]
+        result = await self._tell(lambda m: m.assert_type(area, word, speaker))
+        found = (
+            list(getattr(result, "contradictions", ()) or ()) if not getattr(result, "accepted", True) else []
+        )
+        if not found:
+            return [self.say(intent, "assert_type", "ok", {"area": self.area_view(area)})]
+        # a contradiction: nothing was changed; ask which is right (Sect. 7.2.4.5)
+        c = found[0]
+        other = (
+            c.word if c.layer == "asserted" and c.word and c.word != word else kind_words(c.conflicts_with)
+        )
+        if c.layer == "asserted" and c.word is None:
+            other = kind_words(c.conflicts_with)
+        said = {"asserted": f"{c.speaker or 'someone'} said it is", "acquired": "I thought it was"}.get(
+            c.layer, "it looks to me like"
+        )
+        text = f"You said this is {_article(word)}, but {said} {_article(other)}. Which is it?"
+        about = {
+            "kind": "contradiction",
+            "area": area,
+            "word": _norm(word),
+            "other": _norm(other),
+            "speaker": speaker,
+            "contradictions": [x.to_json() for x in found],
+        }
+        q = _Question(self._next("q-type"), about, -1)
+        self.questions[q.id] = q
+        ask = {
+            "schema": "loci.ask/1",
+            "id": q.id,
+            "stamp": self.clock(),
+            "text": text,
+            "choices": [_norm(word), _norm(other)],
+            "about": about,
+            "in_reply_to": str(intent["id"]),
+        }
+        content = {"area": self.area_view(area), "contradictions": about["contradictions"]}
+        reply = self.say(
+            intent, "assert_type", "ok", content, text=f"Hm, I am not sure it is {_article(word)}."
+        )
+        return [reply, Outgoing("dialogue/ask", ask)]
+
+    async def _answer_contradiction(
+        self, intent: Mapping[str, Any], q: _Question, answer: str, content: dict[str, Any]
+    ) -> list[Outgoing]:
+        """The person chose between the new word and the old one for an area's type."""
+        about = q.about
+        area, word, other = int(about["area"]), str(about["word"]), str(about["other"])
+        if answer not in (word, other):
+            raise LociError(f"Please say {word} or {other}.")
+        del self.questions[q.id]
+        if answer == other:
+            content["kept"] = other
+            return [self.say(intent, "answer", "ok", content, text=f"Thank you, it stays {_article(other)}.")]
+        others = sorted(
+            {str(c["speaker"]) for c in about["contradictions"] if c["layer"] == "asserted" and c["speaker"]}
+        )
+        for sp in others:  # what the others said about this area goes; the answer stands
+            await self._tell(_retracter(area, sp))
+        speaker = str(about["speaker"])
+        result = await self._tell(lambda m: m.assert_type(area, word, speaker))
+        if getattr(result, "accepted", True):
+            content["asserted"] = word
+            content["area"] = self.area_view(area)
+            return [self.say(intent, "answer", "ok", content, text=f"Thank you, it is {_article(word)}.")]
+        content["kept"] = other
+        text = f"I still see {_article(other)} here, so I cannot call it {_article(word)}."
+        return [self.say(intent, "answer", "ok", content, text=text)]
 
     async def _on_assert_name(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:
         _, area = self._here()
@@ -707,6 +774,8 @@ class DialogueAgent:
             raise LociError("I did not ask anything." if not self.questions else f"I did not ask {qid!r}.")
         answer = _norm(str(args["answer"])).strip(".!")
         content: dict[str, Any] = {"question": q.id, "answer": answer}
+        if q.about.get("kind") == "contradiction":
+            return await self._answer_contradiction(intent, q, answer, content)
         if answer in YES:
             del self.questions[q.id]
             self.confirmed.add(q.node)
@@ -877,6 +946,19 @@ class DialogueAgent:
             "about": q.about,
         }
         return [Outgoing("dialogue/ask", msg)]
+
+
+def _retracter(area: int, speaker: str) -> Callable[[Any], Any]:
+    def retract(m: Any) -> Any:
+        return m.retract(area, speaker=speaker)
+
+    return retract
+
+
+def _article(words: str) -> str:
+    """ "a kitchen", "an office"."""
+    w = " ".join(str(words).split())
+    return f"{'an' if w[:1].lower() in 'aeiou' else 'a'} {w}"
 
 
 def _adder(name: str, kind: str, area: int, node: int | None) -> Callable[[Any], Any]:

@@ -367,5 +367,10 @@ def test_follow_me_follows_the_pipelines_people_and_is_refused_without_them() ->
     goals = [o.message for o in out if o.stream == "base/goal"]
     assert len(goals) == 1 and goals[0]["goal"]["x"] == pytest.approx(2.0)  # 1 m short of the person
     assert all(o.stream != "people" for o in out)  # the runtime publishes the people, every scan
-    quiet = agent.on_scan(types.SimpleNamespace(stamp=clock() + 0.2), (0.0, 0.0, 0.0), None)
-    assert all(o.stream != "base/goal" for o in quiet)  # nobody seen: no new goal
+    # the person vanished: once, go and look where they were last seen (0.5 m short of it)...
+    chase = agent.on_scan(types.SimpleNamespace(stamp=clock() + 0.2), (0.0, 0.0, 0.0), None)
+    goals = [o.message for o in chase if o.stream == "base/goal"]
+    assert len(goals) == 1 and goals[0]["goal"]["x"] == pytest.approx(2.5)
+    # ...then no new goal while nobody is seen
+    quiet = agent.on_scan(types.SimpleNamespace(stamp=clock() + 0.3), (0.0, 0.0, 0.0), None)
+    assert all(o.stream != "base/goal" for o in quiet)

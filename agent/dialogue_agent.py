@@ -56,6 +56,7 @@ from typing import Any, Protocol, TypeVar
 
 from agent.bus.bridge import BusClosed
 from agent.dialogue.referring import answer_text, describe_target, kind_words
+from agent.dialogue.referring import with_article as _with_article
 from knowledge.errors import LociError, ProtocolError
 from knowledge.navigation.consistency import FalseDoorway, false_doorways, remove_doorway
 from knowledge.navigation.graph import PLACE, NavigationGraph
@@ -591,7 +592,7 @@ class DialogueAgent:
         said = {"asserted": f"{c.speaker or 'someone'} said it is", "acquired": "I thought it was"}.get(
             c.layer, "it looks to me like"
         )
-        text = f"You said this is {_article(word)}, but {said} {_article(other)}. Which is it?"
+        text = f"You said this is {_a(word)}, but {said} {_a(other)}. Which is it?"
         about = {
             "kind": "contradiction",
             "area": area,
@@ -612,9 +613,7 @@ class DialogueAgent:
             "in_reply_to": str(intent["id"]),
         }
         content = {"area": self.area_view(area), "contradictions": about["contradictions"]}
-        reply = self.say(
-            intent, "assert_type", "ok", content, text=f"Hm, I am not sure it is {_article(word)}."
-        )
+        reply = self.say(intent, "assert_type", "ok", content, text=f"Hm, I am not sure it is {_a(word)}.")
         return [reply, Outgoing("dialogue/ask", ask)]
 
     async def _answer_contradiction(
@@ -628,7 +627,7 @@ class DialogueAgent:
         del self.questions[q.id]
         if answer == other:
             content["kept"] = other
-            return [self.say(intent, "answer", "ok", content, text=f"Thank you, it stays {_article(other)}.")]
+            return [self.say(intent, "answer", "ok", content, text=f"Thank you, it stays {_a(other)}.")]
         others = sorted(
             {str(c["speaker"]) for c in about["contradictions"] if c["layer"] == "asserted" and c["speaker"]}
         )
@@ -639,9 +638,9 @@ class DialogueAgent:
         if getattr(result, "accepted", True):
             content["asserted"] = word
             content["area"] = self.area_view(area)
-            return [self.say(intent, "answer", "ok", content, text=f"Thank you, it is {_article(word)}.")]
+            return [self.say(intent, "answer", "ok", content, text=f"Thank you, it is {_a(word)}.")]
         content["kept"] = other
-        text = f"I still see {_article(other)} here, so I cannot call it {_article(word)}."
+        text = f"I still see {_a(other)} here, so I cannot call it {_a(word)}."
         return [self.say(intent, "answer", "ok", content, text=text)]
 
     async def _on_assert_name(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:
@@ -948,17 +947,16 @@ class DialogueAgent:
         return [Outgoing("dialogue/ask", msg)]
 
 
+def _a(words: str) -> str:
+    """ "a kitchen", "an office" (a possessive or already determined phrase as it is)."""
+    return _with_article(words, definite=False)
+
+
 def _retracter(area: int, speaker: str) -> Callable[[Any], Any]:
     def retract(m: Any) -> Any:
         return m.retract(area, speaker=speaker)
 
     return retract
-
-
-def _article(words: str) -> str:
-    """ "a kitchen", "an office"."""
-    w = " ".join(str(words).split())
-    return f"{'an' if w[:1].lower() in 'aeiou' else 'a'} {w}"
 
 
 def _adder(name: str, kind: str, area: int, node: int | None) -> Callable[[Any], Any]:

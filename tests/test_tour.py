@@ -211,7 +211,7 @@ def test_following_the_tutor_builds_the_tours_graph(
 
 # ------------------------------------------------------------------------------ the tutor
 def test_the_tutor_walks_on_command_waits_for_the_robot_and_stops(tour: TourWorld) -> None:
-    tutor = Tutor(tour.tutor_start, speed=0.6, wait_distance=3.0, resume_distance=1.5)
+    tutor = Tutor(tour.tutor_start, speed=0.6, wait_distance=3.0, resume_distance=1.5, come_back_after=None)
     tutor.advance(0.0)
     tutor.advance(5.0)
     assert tutor.position == pytest.approx(tour.tutor_start) and not tutor.walking
@@ -242,6 +242,33 @@ def test_the_tutor_walks_on_command_waits_for_the_robot_and_stops(tour: TourWorl
         tutor.walk([])
     with pytest.raises(ValueError, match="resume_distance"):
         Tutor((0.0, 0.0), wait_distance=1.0, resume_distance=2.0)
+
+
+def test_a_tutor_left_waiting_comes_back_to_the_robot_then_walks_on(tour: TourWorld) -> None:
+    """A robot that lost sight of the tutor does not come: after ``come_back_after`` seconds the
+    tutor walks back along its way until the robot is within ``resume_distance``, then on."""
+    tutor = Tutor(tour.tutor_start, speed=0.6, wait_distance=3.0, resume_distance=1.5, come_back_after=2.0)
+    tutor.advance(0.0)
+    leg = tour.leg("into_room")
+    tutor.walk(leg.waypoints)
+    robot = (float(tour.start[0]), float(tour.start[1]))
+    t, gaps = 0.0, []
+    for _ in range(120):  # 12 s: out to 3 m, 2 s of waiting, back to 1.5 m
+        t += 0.1
+        tutor.advance(t, robot)
+        gaps.append(math.dist(tutor.position, robot))
+    far = int(np.argmax(gaps))
+    assert gaps[far] == pytest.approx(3.0, abs=0.1)
+    assert min(gaps[far:]) == pytest.approx(1.5, abs=0.1)  # came back to the robot...
+    back = far + int(np.argmin(gaps[far:]))
+    assert max(gaps[back:]) > 2.0 and tutor.walking  # ...and on again (the robot still stands)
+    # the robot now follows closely: the tutor walks the whole leg to its end
+    for _ in range(400):
+        t += 0.1
+        tutor.advance(t, tutor.position)
+    assert not tutor.walking and tutor.position == pytest.approx(leg.waypoints[-1])
+    with pytest.raises(ValueError, match="come_back_after"):
+        Tutor((0.0, 0.0), come_back_after=-1.0)
 
 
 def test_the_robots_lasers_see_the_tutors_legs_and_the_people_detector_finds_the_tutor(

@@ -129,8 +129,10 @@ state = "state/concepts.sqlite3"
 database = "objects"
 
 [follow]
-# the tutor turns through a door right in front of the robot: allow the legs to be hidden a moment
-lost_after = 5.0
+# the tutor turns through a door or round the bucket right in front of the robot: the robot
+# goes to where it last saw the tutor, and a tutor left waiting comes back (drivers/sim/tutor.py);
+# allow for both before giving up
+lost_after = 12.0
 """
     atomic_write_text(path, text)
     return path

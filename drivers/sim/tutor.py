@@ -110,6 +110,9 @@ class Tutor:
         wait_distance: metres; the tutor stops while the robot is farther away than this
             (None: it never waits).
         resume_distance: metres; a waiting tutor walks on once the robot is this near.
+        come_back_after: seconds; a tutor who has waited this long for a robot that does not
+            come (it lost sight of the tutor round a corner) walks back along its way until
+            the robot is within ``resume_distance``, then on again (None: it only waits).
     """
 
     def __init__(
@@ -121,6 +124,7 @@ class Tutor:
         gait: Gait | None = None,
         wait_distance: float | None = 2.5,
         resume_distance: float = 1.6,
+        come_back_after: float | None = 2.5,
     ) -> None:
         x, y = float(position[0]), float(position[1])
         if not all(math.isfinite(v) for v in (x, y, heading)):
@@ -138,6 +142,11 @@ class Tutor:
         self.gait = gait or Gait()
         self.wait_distance = wait_distance
         self.resume_distance = float(resume_distance)
+        if come_back_after is not None and not (math.isfinite(come_back_after) and come_back_after >= 0):
+            raise ValueError(f"come_back_after must be None or seconds >= 0, got {come_back_after!r}")
+        self.come_back_after = come_back_after
+        self._waited = 0.0  # seconds waited for the robot so far
+        self._returning = False  # walking back to the robot
         self._lock = threading.Lock()
         self._xy = (x, y)
         self._heading = float(heading)
@@ -204,13 +213,15 @@ class Tutor:
             phase = (self._walked / self.gait.stride + 0.5) % 1.0
             self._person = SimPerson(path, self.speed, mode="stop", gait=self.gait, phase=phase)
             self._arc = 0.0
-            self._waiting = False
+            self._waiting = self._returning = False
+            self._waited = 0.0
 
     def stop(self) -> None:
         """Stand where the tutor is now (the walk is dropped)."""
         with self._lock:
             self._person = None
-            self._waiting = False
+            self._waiting = self._returning = False
+            self._waited = 0.0
 
     def advance(self, t: float, robot_xy: Point | None = None) -> None:
         """Move on to simulation time ``t`` seconds (the first call only sets the clock).
@@ -225,11 +236,24 @@ class Tutor:
                 return
             if robot_xy is not None and self.wait_distance is not None:
                 gap = math.hypot(robot_xy[0] - self._xy[0], robot_xy[1] - self._xy[1])
-                if gap > self.wait_distance:
+                if gap > self.wait_distance and not self._returning:
                     self._waiting = True
                 elif gap <= self.resume_distance:
-                    self._waiting = False
+                    self._waiting = self._returning = False
+                    self._waited = 0.0
             if self._waiting:
+                self._waited += dt
+                if self.come_back_after is None or self._waited < self.come_back_after or self._arc <= 0.0:
+                    return
+                self._waiting, self._returning = False, True
+            if self._returning:  # back along the way walked, towards the robot left behind
+                self._arc = max(0.0, self._arc - self.speed * dt)
+                x, y, _h = person.body(self._arc / self.speed)
+                self._xy = (x, y)
+                if robot_xy is not None:
+                    self._heading = math.atan2(robot_xy[1] - y, robot_xy[0] - x)
+                if self._arc <= 0.0:  # back at the walk's start: wait there
+                    self._returning, self._waiting = False, True
                 return
             step = min(self.speed * dt, person.length - self._arc)
             self._arc += step

@@ -10,13 +10,15 @@ and the furniture by a few decimetres)::
          |  office   |table###  [B]      TV| kitchen  |  lab    |
          |           |    living room      |          |         |
     2.65 +----+ +----+-------+ +-----------+---+ +----+--+ +----+
-         |[S]                 corridor (20 m x 2 m)             |
-    0.5  +------------------------------------------------------+
+         |                    corridor (20 m x 2 m)             |
+    0.5  +--------[S]-------------------------------------------+
          0.5         6.5                  12.5               20.5  x
 
-* a straight corridor, 20 m × 2 m, with the charging station ``[S]`` against its west end
-  wall; the robot starts in front of it, heading east along the corridor (a 12 m corridor
-  closed at both ends is mostly "room" to the bundled place model; 20 m are corridor);
+* a straight corridor, 20 m × 2 m, with the charging station ``[S]`` against its south wall
+  3.5 m from the west end (:data:`STATION_X`) and the office's door behind it; the robot
+  starts in front of the station, heading east along the corridor (a 12 m corridor closed
+  at both ends is mostly "room" to the bundled place model, and so are its dead end and the
+  places beside an open door; 20 m of plain corridor are corridor);
 * a living room, 6 m × 5 m, behind a 0.85–0.95 m door in the corridor's north wall; in it
   a table standing against the west wall and a mop bucket ``[B]`` (a 0.5 m × 0.4 m box)
   0.78–0.92 m beyond the table's end, so that the gap between them is a narrow opening
@@ -75,6 +77,8 @@ FOLLOW_DISTANCE = 1.0
 BUCKET_SIZE = (0.5, 0.4)
 #: The story's legs of the tutor's walk, in order.
 LEG_NAMES = ("into_room", "false_doorway", "to_view")
+#: x of the charging station (against the corridor's south wall) and of the robot's start, metres
+STATION_X = 4.0
 
 _SPACE_CORRIDOR, _SPACE_OFFICE, _SPACE_LIVING, _SPACE_KITCHEN, _SPACE_LAB = 1, 2, 3, 4, 5
 
@@ -246,7 +250,10 @@ def tour_world(seed: int = 0) -> TourWorld:
     rng = np.random.default_rng(int(seed))
     door_x = 9.5 + float(rng.uniform(-0.3, 0.3))
     widths = rng.uniform(0.85, 0.95, 4)
-    office_door_x = 5.0 + float(rng.uniform(-0.4, 0.4))
+    # the office's door near the corridor's west end, behind the robot's start: the tour's
+    # corridor nodes lie in the plain corridor (beside an open door or at the dead end the
+    # bundled model often says "room")
+    office_door_x = 1.6 + float(rng.uniform(-0.2, 0.2))
     gap = float(rng.uniform(0.78, 0.92))
     table_len = float(rng.uniform(1.3, 1.5))
     table_y = 5.2 + float(rng.uniform(-0.15, 0.15))
@@ -272,7 +279,12 @@ def tour_world(seed: int = 0) -> TourWorld:
     bucket_w, bucket_d = BUCKET_SIZE
     bucket_c = (table[2] + gap + bucket_w / 2, table_y)
     items: list[tuple[str, WorldRect, str, float]] = [
-        ("charging_station", (corridor[0], 1.25, corridor[0] + 0.3, 1.75), "solid", 0.0),
+        (
+            "charging_station",
+            (STATION_X - 0.25, corridor[1], STATION_X + 0.25, corridor[1] + 0.3),
+            "solid",
+            math.pi / 2,
+        ),
         ("table", table, "solid", math.pi / 2),
         (
             "bucket",
@@ -350,7 +362,7 @@ def tour_world(seed: int = 0) -> TourWorld:
     )
 
     objects = _pictures(furniture)
-    start: Pose = (corridor[0] + 0.75, 1.5, 0.0)
+    start: Pose = (STATION_X, 1.5, 0.0)  # in front of the station, facing along the corridor
     tutor_start = (start[0] + 1.1, 1.5)
     mid_gap = (table[2] + gap / 2, table_y)
     inside = (door_x, y_rooms + 0.9)

@@ -1,4 +1,4 @@
-"""Argument types and option groups shared by the ``loci`` commands.
+"""Argument types, option groups and output helpers shared by the ``loci`` commands.
 
 The types raise :class:`argparse.ArgumentTypeError`, so a bad value is a usage error that
 names the option (exit status 2), never a traceback.
@@ -7,8 +7,11 @@ names the option (exit status 2), never a traceback.
 from __future__ import annotations
 
 import argparse
+import json
 import math
+import sys
 from collections.abc import Callable
+from typing import Any
 
 
 def number(*, minimum: float = 0.0, inclusive: bool = False, what: str = "number") -> Callable[[str], float]:
@@ -86,3 +89,14 @@ def add_bus_options(parser: argparse.ArgumentParser, *, mode: bool = False) -> N
         parser.add_argument(
             "--mode", choices=("peer", "client"), default="peer", help="peer (default) or client of a router"
         )
+
+
+def emit_json(obj: dict[str, Any]) -> None:
+    """``--json`` output: one indented JSON object on stdout (NaN refused: it is not JSON)."""
+    json.dump(obj, sys.stdout, indent=2, allow_nan=False)
+    sys.stdout.write("\n")
+
+
+def pct(v: float) -> str:
+    """A fraction as a fixed-width percentage: ``0.9312`` → ``" 93.12 %"``."""
+    return f"{100 * v:6.2f} %"

@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from agent.commands.options import emit_json, pct
 from agent.commands.topology import register_topology_commands
 
 log = logging.getLogger("loci.places")
@@ -120,15 +121,6 @@ def _csv(value: str | None) -> tuple[str, ...] | None:
     if not value:
         return None
     return tuple(v.strip() for v in value.split(",") if v.strip())
-
-
-def _emit_json(obj: dict[str, Any]) -> None:
-    json.dump(obj, sys.stdout, indent=2, allow_nan=False)
-    sys.stdout.write("\n")
-
-
-def _pct(v: float) -> str:
-    return f"{100 * v:6.2f} %"
 
 
 # ---------------------------------------------------------------------------- register
@@ -290,12 +282,12 @@ def cmd_train(args: argparse.Namespace) -> int:
         "timings_s": {k: round(v, 3) for k, v in timings.items()},
     }
     if args.json:
-        _emit_json(summary)
+        emit_json(summary)
         return 0
     print(f"trained on {len(maps)} maps ({', '.join(model.data.maps)})")
     print("examples: " + ", ".join(f"{c} {n}" for c, n in model.data.examples_per_class.items()))
     print(
-        f"decision list: {' -> '.join(dl.order_)}  ({dl.selection_} accuracy {_pct(dl.order_scores_[0][1])})"
+        f"decision list: {' -> '.join(dl.order_)}  ({dl.selection_} accuracy {pct(dl.order_scores_[0][1])})"
     )
     print(
         f"features: {len(model.prediction_columns())} computed for prediction "
@@ -395,7 +387,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         },
     }
     if args.json:
-        _emit_json(result)
+        emit_json(result)
         return 0
     print(
         f"{int(known.sum())} scans in {', '.join(scans.maps)}; "
@@ -408,10 +400,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             + ", ".join(f"{c} {n}" for c, n in ignored.items())
             + (hint or "; rename them with --merge CLASS=CLASS")
         )
-    print(f"accuracy            {_pct(s_all.accuracy)}   ({len(classes)} classes)")
-    print(f"balanced accuracy   {_pct(s_all.balanced_accuracy)}")
+    print(f"accuracy            {pct(s_all.accuracy)}   ({len(classes)} classes)")
+    print(f"balanced accuracy   {pct(s_all.balanced_accuracy)}")
     if s_two is not None:
-        print(f"room/corridor       {_pct(s_two.accuracy)}   (doorway cells ignored)")
+        print(f"room/corridor       {pct(s_two.accuracy)}   (doorway cells ignored)")
     print()
     print(format_confusion(s_all))
     if orders:
@@ -419,7 +411,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         print("decision list        accuracy")
         for o, a in orders:
             mark = "  <- model" if tuple(o) == tuple(model.decision_list.order_) else ""
-            print(f"{order_name(o):<20} {_pct(a)}{mark}")
+            print(f"{order_name(o):<20} {pct(a)}{mark}")
     print()
     print("most important features (book Table 3.5):")
     for cls, names in result["important_features"].items():
@@ -457,7 +449,7 @@ def cmd_label(args: argparse.Namespace) -> int:
         "timings_s": {k: round(v, 3) for k, v in result.timings.items()},
     }
     if args.json:
-        _emit_json(summary)
+        emit_json(summary)
         return 0
     print(f"labelled {len(result.cells)} free cells of {grid.name} in {result.timings['total']:.1f} s")
     for c in result.classes:

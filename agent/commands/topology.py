@@ -9,11 +9,11 @@ by :mod:`agent.commands.places`.
 from __future__ import annotations
 
 import argparse
-import json
 import logging
-import sys
 from pathlib import Path
 from typing import Any
+
+from agent.commands.options import emit_json, pct
 
 log = logging.getLogger("loci.places.topology")
 
@@ -129,15 +129,6 @@ def register_topology_commands(psub: argparse._SubParsersAction[argparse.Argumen
 
 
 # ---------------------------------------------------------------------------- helpers
-
-
-def _emit_json(obj: dict[str, Any]) -> None:
-    json.dump(obj, sys.stdout, indent=2, allow_nan=False)
-    sys.stdout.write("\n")
-
-
-def _pct(v: float) -> str:
-    return f"{100 * v:6.2f} %"
 
 
 def load_map(path: Path, resolution: float | None, free_grey: int | None) -> Any:
@@ -266,7 +257,7 @@ def cmd_topology(args: argparse.Namespace) -> int:
         "files": {k: str(p) for k, p in paths.items()},
     }
     if args.json:
-        _emit_json(summary)
+        emit_json(summary)
         return 0
     print(
         f"topology of {grid.name}: {n_free} free cells ({grid.shape[0]} x {grid.shape[1]} at {grid.resolution} m), "
@@ -355,11 +346,11 @@ def cmd_segment_score(args: argparse.Namespace) -> int:
     result = score(seg, gt, free_threshold=args.free_threshold, restrict_to_gt_free=args.restrict)
     result = {"segments_file": str(args.segments), "gt_file": str(args.gt), **result}
     if args.json:
-        _emit_json(result)
+        emit_json(result)
         return 0
     print(
         f"{result['rooms']} rooms in {args.gt.name}, {result['segments']} segments of > 100 px in {args.segments.name}"
     )
-    print(f"recall     mean {_pct(result['recall_mean'])}   pooled {_pct(result['recall_pooled'])}")
-    print(f"precision  mean {_pct(result['precision_mean'])}   pooled {_pct(result['precision_pooled'])}")
+    print(f"recall     mean {pct(result['recall_mean'])}   pooled {pct(result['recall_pooled'])}")
+    print(f"precision  mean {pct(result['precision_mean'])}   pooled {pct(result['precision_pooled'])}")
     return 0

@@ -19,19 +19,37 @@ therefore hides the beams of detected legs from everything that models the build
   invent walls where the legs were, nor erase the wall behind them).
 
 Ranges are metres; beam ``m`` of a ``(B,)`` scan is at ``angle_min + m·angle_increment``.
+
+The per-beam work runs in small numba kernels (compiled on first use, cached on disk):
+the agent masks every scan, so this sits on its per-scan path.
 """
 
 from __future__ import annotations
 
 import math
+import operator
+from functools import lru_cache
 
+import numba
 import numpy as np
 import numpy.typing as npt
 
 from knowledge.people.detector import SegmentDetection
-from knowledge.people.segmentation import BoolArray, FloatArray, has_return
+from knowledge.people.segmentation import BoolArray, FloatArray
 
 __all__ = ["fill_masked", "free_standing", "person_beams", "unknown_masked"]
+
+#: Unmasked beams on each side of a masked run whose end points define the wall behind it.
+WALL_POINTS = 4
+#: Largest distance (metres) of a side's points from their fitted line for it to count as a wall.
+WALL_TOLERANCE = 0.03
+
+
+def _kernel_array(a: npt.NDArray[np.generic], dtype: type[np.generic]) -> npt.NDArray[np.generic]:
+    """``a`` as a writeable C-contiguous array of ``dtype`` (copied only when it is not one), so
+    that every call reaches the same compiled signature of a kernel."""
+    out = np.ascontiguousarray(a, dtype=dtype)
+    return out if out.flags.writeable else out.copy()
 
 
 def free_standing(detection: SegmentDetection, clearance: float) -> BoolArray:
@@ -45,27 +63,45 @@ def free_standing(detection: SegmentDetection, clearance: float) -> BoolArray:
     into the wall beside it at about the same range.
     """
     seg = detection.segmentation
-    idx, rr = seg.index, seg.ranges
-    m = seg.n_points
-    first, last = seg.start, seg.stop - 1
+    out = np.zeros(seg.n_segments, dtype=bool)
+    if seg.n_segments:
+        _free_standing(
+            _kernel_array(seg.index, np.intp),
+            _kernel_array(seg.ranges, np.float64),
+            _kernel_array(seg.start, np.intp),
+            _kernel_array(seg.stop, np.intp),
+            float(clearance),
+            out,
+        )
+    return out
 
-    def side_clear(end: npt.NDArray[np.intp], step: int) -> BoolArray:
-        ok = np.ones(end.shape, dtype=bool)
-        best = np.full(end.shape, -np.inf)
-        adjacent = np.zeros(end.shape, dtype=bool)
-        for k in (1, 2):
-            nb = end + step * k
-            inside = (nb >= 0) & (nb < m)
-            nbc = np.clip(nb, 0, max(m - 1, 0))
+
+@numba.njit(cache=True, nogil=True)
+def _side_clear(idx: np.ndarray, rr: np.ndarray, end: int, step: int, clearance: float) -> bool:
+    """One side of :func:`free_standing` for the segment ending at packed point ``end``."""
+    m = idx.shape[0]
+    best = -np.inf
+    adjacent = False
+    for k in (1, 2):
+        nb = end + step * k
+        if 0 <= nb < m:
             if k == 1:
-                adjacent = inside & (np.abs(idx[nbc] - idx[end]) == 1)
-            best = np.where(inside, np.maximum(best, rr[nbc]), best)
-        ok = ~adjacent | (best - rr[end] >= clearance)
-        return ok
+                adjacent = abs(idx[nb] - idx[end]) == 1
+            v = rr[nb]
+            if v > best or math.isnan(v):  # np.maximum: NaN wins
+                best = v
+    return not adjacent or best - rr[end] >= clearance
 
-    if seg.n_segments == 0:
-        return np.zeros(0, dtype=bool)
-    return side_clear(first, -1) & side_clear(last, 1)
+
+@numba.njit(cache=True, nogil=True)
+def _free_standing(
+    idx: np.ndarray, rr: np.ndarray, start: np.ndarray, stop: np.ndarray, clearance: float, out: np.ndarray
+) -> None:
+    """``out[s]`` (S,) = segment ``s`` is free-standing (see :func:`free_standing`)."""
+    for s in range(start.shape[0]):
+        out[s] = _side_clear(idx, rr, start[s], -1, clearance) and _side_clear(
+            idx, rr, stop[s] - 1, 1, clearance
+        )
 
 
 def person_beams(detection: SegmentDetection, *, margin: int = 1, clearance: float | None = 0.2) -> BoolArray:
@@ -84,89 +120,97 @@ def person_beams(detection: SegmentDetection, *, margin: int = 1, clearance: flo
     if clearance is not None and not clearance >= 0:
         raise ValueError(f"clearance must be None or a distance >= 0 metres, got {clearance}")
     seg = detection.segmentation
-    flags = detection.is_person
-    if clearance is not None and flags.any():
-        flags = flags & free_standing(detection, clearance)
-    mask = seg.beam_mask(flags)
-    if margin == 0 or not mask.any():
-        return mask
-    owner = seg.beam_segment()  # (B,) segment of each beam, −1 without a return
-    sizes = seg.sizes
-    loose = np.ones(seg.n_beams, dtype=bool)  # beams the margin may take
-    has = owner >= 0
-    loose[has] = sizes[owner[has]] == 1
-    grown = mask.copy()
-    n = seg.n_beams
-    for shift in range(1, margin + 1):
-        left = np.zeros(n, dtype=bool)
-        left[:-shift] = mask[shift:]  # beam m is `shift` beams before a person beam
-        right = np.zeros(n, dtype=bool)
-        right[shift:] = mask[:-shift]
-        grown |= (left | right) & loose
-    # the margin must not bridge a gap wider than itself: only beams adjacent to the grown
-    # region through loose beams are kept (a run of loose beams is taken from its ends)
-    return _connected(grown, mask)
-
-
-def _connected(grown: BoolArray, core: BoolArray) -> BoolArray:
-    """The beams of ``grown`` in a run of ``grown`` that contains a ``core`` beam."""
-    if grown.all() or not grown.any():
-        return grown
-    edges = np.flatnonzero(np.diff(grown.astype(np.int8)))
-    starts = np.concatenate(([0], edges + 1))
-    stops = np.concatenate((edges + 1, [grown.size]))
-    out = np.zeros_like(grown)
-    for a, b in zip(starts.tolist(), stops.tolist(), strict=True):
-        if grown[a] and core[a:b].any():
-            out[a:b] = True
+    flags = np.asarray(detection.is_person, dtype=bool)
+    if flags.shape != (seg.n_segments,):
+        return seg.beam_mask(flags)  # raises: one flag per segment
+    out = np.zeros(seg.n_beams, dtype=bool)
+    if not flags.any():
+        return out
+    _person_beams(
+        _kernel_array(seg.index, np.intp),
+        _kernel_array(seg.ranges, np.float64),
+        _kernel_array(seg.start, np.intp),
+        _kernel_array(seg.stop, np.intp),
+        _kernel_array(flags, np.bool_),
+        0 if margin == 0 else min(operator.index(margin), seg.n_beams),  # none reaches beyond the scan
+        -1.0 if clearance is None else float(clearance),
+        out,
+    )
     return out
 
 
-def _runs(mask: BoolArray) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
-    """Start and stop (exclusive) of every run of True in ``mask``."""
-    d = np.diff(np.concatenate(([0], mask.astype(np.int8), [0])))
-    return np.flatnonzero(d == 1).astype(np.intp), np.flatnonzero(d == -1).astype(np.intp)
+@numba.njit(cache=True, nogil=True)
+def _person_beams(
+    idx: np.ndarray,
+    rr: np.ndarray,
+    start: np.ndarray,
+    stop: np.ndarray,
+    flags: np.ndarray,
+    margin: int,
+    clearance: float,
+    out: np.ndarray,
+) -> None:
+    """:func:`person_beams` into ``out`` (B,) bool, all False on entry (``clearance < 0``: off)."""
+    n = out.shape[0]
+    core = False
+    for s in range(start.shape[0]):
+        if not flags[s]:
+            continue
+        if clearance >= 0.0 and not (
+            _side_clear(idx, rr, start[s], -1, clearance) and _side_clear(idx, rr, stop[s] - 1, 1, clearance)
+        ):
+            continue
+        for p in range(start[s], stop[s]):
+            out[idx[p]] = True
+            core = True
+    if margin == 0 or not core:
+        return
+    # the margin may take no-return beams and the beams of single-point segments ("loose")
+    loose = np.ones(n, dtype=np.bool_)
+    for s in range(start.shape[0]):
+        if stop[s] - start[s] != 1:
+            for p in range(start[s], stop[s]):
+                loose[idx[p]] = False
+    # grown: a core beam, or a loose beam within `margin` beams of one (no wrap-around)
+    grown = out.copy()
+    last = -n - margin - 1  # the nearest core beam at or before j
+    for j in range(n):
+        if out[j]:
+            last = j
+        elif loose[j] and j - last <= margin:
+            grown[j] = True
+    nxt = 2 * n + margin + 1  # the nearest core beam at or after j
+    for j in range(n - 1, -1, -1):
+        if out[j]:
+            nxt = j
+        elif loose[j] and nxt - j <= margin:
+            grown[j] = True
+    # the margin must not bridge a gap wider than itself: only the runs of grown beams that
+    # hold a core beam are kept (a run of loose beams is taken from its ends)
+    j = 0
+    while j < n:
+        if not grown[j]:
+            j += 1
+            continue
+        a = j
+        keep = False
+        while j < n and grown[j]:
+            keep = keep or out[j]
+            j += 1
+        if keep:
+            for q in range(a, j):
+                out[q] = True
 
 
-#: Unmasked beams on each side of a masked run whose end points define the wall behind it.
-WALL_POINTS = 4
-#: Largest distance (metres) of a side's points from their fitted line for it to count as a wall.
-WALL_TOLERANCE = 0.03
+@lru_cache(maxsize=16)
+def _directions(n: int, angle_min: float, angle_increment: float) -> tuple[FloatArray, FloatArray]:
+    """``(cos, sin)`` ``(n,)`` of the beam angles ``angle_min + m·angle_increment`` (a scanner's
+    geometry does not change from scan to scan). Private and never written to."""
+    theta = angle_min + np.arange(n, dtype=np.float64) * angle_increment
+    return np.cos(theta), np.sin(theta)
 
 
-def _side_line(xs: list[float], ys: list[float]) -> tuple[float, float, float, float] | None:
-    """``(cx, cy, ux, uy)``: a point on and the unit direction of the line through the points
-    ``(xs[i], ys[i])``, or None when they are too few, too close together or not on a line.
-    (Plain floats: a handful of points per call, where numpy's overhead would dominate.)"""
-    k = len(xs)
-    if k < 2:
-        return None
-    cx, cy = sum(xs) / k, sum(ys) / k
-    dx = [x - cx for x in xs]
-    dy = [y - cy for y in ys]
-    sxx = sum(v * v for v in dx)
-    syy = sum(v * v for v in dy)
-    sxy = sum(u * v for u, v in zip(dx, dy, strict=True))
-    # principal axis of the 2x2 scatter matrix, in closed form
-    phi = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
-    ux, uy = math.cos(phi), math.sin(phi)
-    along = [u * ux + v * uy for u, v in zip(dx, dy, strict=True)]
-    if max(along) - min(along) < 0.05:  # points within a few centimetres: no direction
-        return None
-    if max(abs(v * ux - u * uy) for u, v in zip(dx, dy, strict=True)) > WALL_TOLERANCE:
-        return None
-    return cx, cy, ux, uy
-
-
-def _hit_line(cos: FloatArray, sin: FloatArray, line: tuple[float, float, float, float]) -> FloatArray:
-    """``(k,)`` range along rays from the origin with directions ``(cos, sin)`` to the line
-    (inf: the line is not ahead)."""
-    cx, cy, ux, uy = line
-    den = cos * uy - sin * ux  # cross(ray, u)
-    num = cx * uy - cy * ux  # cross(c, u)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = num / den
-    return np.where(np.isfinite(t) & (t > 0), t, np.inf)
+_NO_ANGLES = np.zeros(0)
 
 
 def fill_masked(
@@ -203,54 +247,160 @@ def fill_masked(
         raise ValueError(f"ranges and mask must be 1-D of the same length, got {r.shape} and {m.shape}")
     if not m.any():
         return r
-    with np.errstate(invalid="ignore"):
-        usable = ~m & ~np.isnan(r) & (r >= range_min) & (r > 0.0)
-    hit = has_return(r, range_max, range_min)
-    value = np.where(hit, r, range_max)
-    idx = np.flatnonzero(usable)
-    if idx.size == 0:
-        return r
-    n = r.size
-    cos = sin = px = py = None
-    if angle_increment is not None:
-        theta = angle_min + np.arange(n, dtype=np.float64) * angle_increment
-        cos, sin = np.cos(theta), np.sin(theta)
-        with np.errstate(invalid="ignore"):
-            px, py = r * cos, r * sin
-    starts, stops = _runs(m)
-    out = r.copy()
-    for a, b in zip(starts.tolist(), stops.tolist(), strict=True):
-        k = int(np.searchsorted(idx, a))  # first usable beam at or after a (it is >= b)
-        sides: list[npt.NDArray[np.intp]] = []
-        if k > 0:
-            sides.append(idx[max(0, k - WALL_POINTS) : k][::-1])
-        elif circular:
-            sides.append(idx[-WALL_POINTS:][::-1])
-        if k < idx.size:
-            sides.append(idx[k : k + WALL_POINTS])
-        elif circular:
-            sides.append(idx[:WALL_POINTS])
-        if not sides:
+    # r is np.array's own C-contiguous copy: the kernel fills it in place
+    if angle_increment is None:
+        cos = sin = _NO_ANGLES
+    else:
+        cos, sin = _directions(r.size, float(angle_min), float(angle_increment))
+    _fill_runs(r, _kernel_array(m, np.bool_), float(range_max), float(range_min), bool(circular), cos, sin)
+    return r
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _fill_runs(
+    r: np.ndarray,
+    m: np.ndarray,
+    range_max: float,
+    range_min: float,
+    circular: bool,
+    cos: np.ndarray,
+    sin: np.ndarray,
+) -> None:
+    """:func:`fill_masked` in place on ``r`` (B,), masked beams ``m`` (B,) bool; ``cos``/``sin``
+    (B,) are the beam directions, or empty without ``angle_increment``.
+
+    Only masked beams are written and only unmasked ones are read as neighbours, so filling
+    in place reads no filled value. The arithmetic repeats the plain-numpy original step by
+    step (same operations in the same order, no fast-math), so the results are the same.
+    """
+    n = r.shape[0]
+    usable = np.empty(n, dtype=np.intp)  # the unmasked beams that can be a neighbour
+    nu = 0
+    for j in range(n):
+        v = r[j]
+        if not m[j] and not math.isnan(v) and v >= range_min and v > 0.0:
+            usable[nu] = j
+            nu += 1
+    if nu == 0:
+        return
+    walls = cos.shape[0] == n
+    side = np.empty((2, WALL_POINTS), dtype=np.intp)  # per side, the usable beams nearest first
+    n_side = np.zeros(2, dtype=np.intp)
+    px = np.empty(WALL_POINTS)
+    py = np.empty(WALL_POINTS)
+    lines = np.empty((2, 4))  # (cx, cy, ux, uy) of the walls beside the run
+    k = 0
+    j = 0
+    while j < n:
+        if not m[j]:
+            j += 1
             continue
-        fallback = min(max(float(value[s[0]]) for s in sides), range_max)
-        fill = np.full(b - a, fallback)
-        if cos is not None and sin is not None and px is not None and py is not None:
-            best = np.full(b - a, np.inf)
-            for side in sides:
-                if not hit[side[0]]:  # the wall must continue from the beam next to the run
+        a = j
+        while j < n and m[j]:
+            j += 1
+        b = j
+        while k < nu and usable[k] < a:
+            k += 1  # the first usable beam after the run
+        ns = 0
+        if k > 0 or circular:
+            top = k if k > 0 else nu
+            c = 0
+            for q in range(top - 1, max(0, top - WALL_POINTS) - 1, -1):
+                side[ns, c] = usable[q]
+                c += 1
+            n_side[ns] = c
+            ns += 1
+        if k < nu or circular:
+            lo = k if k < nu else 0
+            c = 0
+            for q in range(lo, min(lo + WALL_POINTS, nu)):
+                side[ns, c] = usable[q]
+                c += 1
+            n_side[ns] = c
+            ns += 1
+        if ns == 0:
+            continue
+        # the larger neighbour (no return: range_max), capped at range_max
+        fallback = np.nan
+        for s in range(ns):
+            v = r[side[s, 0]]
+            if not (math.isfinite(v) and v > 0.0 and v >= range_min and v < range_max):
+                v = range_max
+            if s == 0 or v > fallback:
+                fallback = v
+        if range_max < fallback:
+            fallback = range_max
+        n_lines = 0
+        if walls:
+            for s in range(ns):
+                c = 0
+                for q in range(n_side[s]):
+                    i = side[s, q]
+                    v = r[i]
+                    if math.isfinite(v) and v > 0.0 and v >= range_min and v < range_max:
+                        px[c] = v * cos[i]
+                        py[c] = v * sin[i]
+                        c += 1
+                    elif q == 0:
+                        break  # the wall must continue from the beam next to the run
+                if c < 2:
                     continue
-                side = side[hit[side]]
-                if side.size < 2:
-                    continue
-                line = _side_line(px[side].tolist(), py[side].tolist())
-                if line is None:
-                    continue
-                t = _hit_line(cos[a:b], sin[a:b], line)
-                t = np.where(t > r[a:b], t, np.inf)  # behind the legs, not in front of them
-                best = np.minimum(best, t)
-            fill = np.where(np.isfinite(best), np.minimum(best, range_max), fill)
-        out[a:b] = fill
-    return out
+                if _side_line(px, py, c, lines[n_lines]):
+                    n_lines += 1
+        for i in range(a, b):
+            best = np.inf
+            for w in range(n_lines):
+                cx, cy, ux, uy = lines[w, 0], lines[w, 1], lines[w, 2], lines[w, 3]
+                t = (cx * uy - cy * ux) / (cos[i] * uy - sin[i] * ux)
+                if not (math.isfinite(t) and t > 0.0) or not t > r[i]:
+                    continue  # the line is not ahead, or it is in front of the legs
+                if t < best:
+                    best = t
+            if math.isfinite(best):
+                r[i] = best if best < range_max else range_max
+            else:
+                r[i] = fallback
+
+
+@numba.njit(cache=True, nogil=True)
+def _side_line(px: np.ndarray, py: np.ndarray, k: int, line: np.ndarray) -> bool:
+    """``line[:] = (cx, cy, ux, uy)``, a point on and the unit direction of the line through the
+    first ``k`` points ``(px, py)``; False when they are too close together or not on a line."""
+    cx = 0.0
+    cy = 0.0
+    for i in range(k):
+        cx += px[i]
+        cy += py[i]
+    cx /= k
+    cy /= k
+    sxx = 0.0
+    syy = 0.0
+    sxy = 0.0
+    for i in range(k):
+        dx, dy = px[i] - cx, py[i] - cy
+        sxx += dx * dx
+        syy += dy * dy
+        sxy += dx * dy
+    # principal axis of the 2x2 scatter matrix, in closed form
+    phi = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
+    ux, uy = math.cos(phi), math.sin(phi)
+    lo = hi = across = 0.0
+    for i in range(k):
+        dx, dy = px[i] - cx, py[i] - cy
+        along = dx * ux + dy * uy
+        off = abs(dy * ux - dx * uy)
+        if i == 0 or along > hi:  # Python's max/min: NaN only when first
+            hi = along
+        if i == 0 or along < lo:
+            lo = along
+        if i == 0 or off > across:
+            across = off
+    if hi - lo < 0.05:  # points within a few centimetres: no direction
+        return False
+    if across > WALL_TOLERANCE:
+        return False
+    line[0], line[1], line[2], line[3] = cx, cy, ux, uy
+    return True
 
 
 def unknown_masked(ranges: npt.ArrayLike, mask: npt.ArrayLike) -> FloatArray:

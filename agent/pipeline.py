@@ -16,14 +16,16 @@ scan's stamp (:mod:`agent.odom_sync`) and runs, in this order:
    jambs; docs/people.md "In the agent" has the measurements behind this;
 2. a front laser (less than a full turn): its beam endpoints go into the sparse local map
    and the 360° scan gets its rear beams from that map, beams without a hit interpolated
-   (Sect. 3.5, :func:`~knowledge.metric.rear_beams.full_scan`); a 360° laser is only
-   resampled to the model's beams;
+   (Sect. 3.5, :func:`~knowledge.metric.rear_beams.assemble_scan`); a 360° laser is only
+   resampled to the model's beams. The share of beams that are known, not interpolated, is
+   the scan's :attr:`StepResult.coverage` (0.5 for a front laser right after start-up);
 3. the place model's histogram over the classes (probabilistic decision list, Sect. 4.3);
    the label is its most probable class;
 4. the doorway detector on the obstacle points around the robot (the local map's for a
    front laser, the scan's for a 360° laser);
 5. the navigation graph (Sect. 7.2.2): node dropping, last-N label window and majority
-   vote, doorway nodes;
+   vote (a label votes only when the coverage is at least the graph's ``min_coverage``),
+   doorway nodes;
 6. the topological areas (Sect. 7.2.3) and their change events.
 
 The result depends only on the sequence of ``(scan, pose)`` inputs (and the model and
@@ -50,7 +52,7 @@ import numpy as np
 from agent.config import AgentConfig, build_dataclass, dataclass_table
 from drivers.messages import LaserScan, Pose2D
 from knowledge.metric.local_map import LocalMap, LocalMapParams
-from knowledge.metric.rear_beams import FullScanParams, full_scan
+from knowledge.metric.rear_beams import FullScanParams, assemble_scan
 from knowledge.navigation import persistence
 from knowledge.navigation.doorways import Doorway, DoorwayDetector, DoorwayParams, scan_points
 from knowledge.navigation.graph import DOORWAY, GraphParams, GraphUpdate, NavigationGraph
@@ -206,6 +208,8 @@ class StepResult:
         events: the areas' change events.
         people: the people of this scan (None: people detection is off).
         masked: ``(B,)`` bool, the scan's beams hidden as people (None: nothing hidden).
+        coverage: the share of ``ranges``' beams measured or hit in the local map (the rest
+            are interpolated); below the graph's ``min_coverage`` the label did not vote.
     """
 
     scan: LaserScan
@@ -219,6 +223,7 @@ class StepResult:
     events: tuple[AreaEvent, ...]
     people: PeopleFrame | None = None
     masked: np.ndarray | None = None
+    coverage: float = 1.0
 
     @property
     def stamp(self) -> float:
@@ -346,7 +351,9 @@ class Pipeline:
                     map_r = unknown_masked(raw, m)
                     door_r = {"unknown": map_r, "raw": raw, "filled": cls_r}[pp.doorways]
         if full:
-            ranges = full_scan(cls_r, angles, range_max=scan.range_max, params=fsp, range_min=scan.range_min)
+            ranges, known = assemble_scan(
+                cls_r, angles, range_max=scan.range_max, params=fsp, range_min=scan.range_min
+            )
             points = scan_points(door_r, angles, range_max=scan.range_max, range_min=scan.range_min)
         else:
             self.local_map.add(
@@ -357,7 +364,7 @@ class Pipeline:
                 range_max=scan.range_max,
                 range_min=scan.range_min,
             )
-            ranges = full_scan(
+            ranges, known = assemble_scan(
                 cls_r,
                 angles,
                 range_max=scan.range_max,
@@ -371,7 +378,10 @@ class Pipeline:
         label = self.classes[int(np.argmax(proba))]
         doorway = self.detector.update(points, sensor, scan.stamp)
         in_opening = self.detector.passing
-        upd = self.graph.update(sensor, label, doorway, in_opening=in_opening, ranges=ranges)
+        coverage = float(known.mean())
+        upd = self.graph.update(
+            sensor, label, doorway, in_opening=in_opening, ranges=ranges, coverage=coverage
+        )
         events = tuple(self.areas.update(self.graph))
         self.scans += 1
         self.last_stamp = scan.stamp
@@ -389,6 +399,7 @@ class Pipeline:
             events=events,
             people=frame,
             masked=mask,
+            coverage=coverage,
         )
 
     # ------------------------------------------------------------------ documents
@@ -499,4 +510,5 @@ def place_message(result: StepResult) -> dict[str, Any]:
         "label": result.label,
         "probabilities": dict(result.probabilities),
         "node": result.node,
+        "coverage": round(result.coverage, 4),
     }

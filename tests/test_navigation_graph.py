@@ -95,6 +95,52 @@ def test_window_keeps_the_last_n_place_labels_and_ignores_doorway() -> None:
     assert g2.node(2).label == "corridor"  # a tie: the first in name order when new
 
 
+def test_labels_of_mostly_guessed_scans_do_not_vote() -> None:
+    # a front laser right after start-up: half of the 360° scan is interpolated
+    g = NavigationGraph(GraphParams(window=4, min_coverage=0.75))
+    for _ in range(5):
+        g.update((0.0, 0.0, 0.0), "room", coverage=0.5)
+    assert list(g.recent) == [None] * 4  # abstained, each in its slot of the window
+    start = g.node(1)
+    assert start.label is None and start.votes == {}  # a node, but no label yet
+    for x in np.arange(0.1, 1.3, 0.1):
+        g.update((float(x), 0.0, 0.0), "corridor", coverage=0.8)
+    assert g.node(2).votes == {"corridor": 4} and g.node(2).label == "corridor"
+    # coming back with the rear seen: the start node gets its first votes
+    for x in np.arange(1.2, -0.05, -0.1):
+        g.update((float(x), 0.0, math.pi), "corridor", coverage=0.9)
+    assert start.label == "corridor"
+    # exactly at the threshold votes; without a coverage every label votes
+    g2 = NavigationGraph(GraphParams(min_coverage=0.75))
+    g2.update((0.0, 0.0, 0.0), "room", coverage=0.75)
+    g2.update((0.0, 0.0, 0.0), "hallway")
+    assert list(g2.recent) == ["room", "hallway"]
+    # 0: every label votes
+    g3 = NavigationGraph(GraphParams(min_coverage=0.0))
+    g3.update((0.0, 0.0, 0.0), "room", coverage=0.0)
+    assert g3.node(1).label == "room"
+    # abstaining scans push old labels out of the window: a node reached later does not get them
+    g4 = NavigationGraph(GraphParams(window=4))
+    for _ in range(4):
+        g4.update((0.0, 0.0, 0.0), "room", coverage=0.9)
+    for _ in range(2):
+        g4.update((0.5, 0.0, 0.0), "corridor", coverage=0.3)
+    g4.update((1.1, 0.0, 0.0), "corridor", coverage=0.3)  # a new node, the window: room + 3 abstained
+    assert g4.node(2).votes == {"room": 1} and g4.node(2).label == "room"
+
+
+@pytest.mark.parametrize("bad", [-0.1, 1.5, float("nan"), True])
+def test_min_coverage_must_be_a_share(bad: object) -> None:
+    with pytest.raises(ValueError, match="min_coverage"):
+        GraphParams(min_coverage=bad)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("bad", [-0.1, 1.01, float("nan"), float("inf")])
+def test_a_coverage_outside_zero_one_is_an_error(bad: float) -> None:
+    with pytest.raises(ValueError, match="coverage"):
+        NavigationGraph().update((0.0, 0.0, 0.0), "room", coverage=bad)
+
+
 def test_doorway_nodes_and_no_place_node_inside_an_opening() -> None:
     g = NavigationGraph()
     walk(g, np.arange(0.0, 3.0, 0.05), label="corridor")
@@ -238,6 +284,18 @@ def test_round_trip(tmp_path: Path) -> None:
     assert max(g2.nodes) == g.next_id
     # written atomically: nothing but the file itself is left in the folder
     assert sorted(p.name for p in path.parent.iterdir()) == ["graph.json"]
+
+
+def test_min_coverage_is_saved_and_old_documents_load_with_every_label_voting(tmp_path: Path) -> None:
+    g, areas = built_graph()
+    g.params = GraphParams(min_coverage=0.6)
+    doc = persistence.to_document(g, areas)
+    assert persistence.from_document(doc)[0].params.min_coverage == 0.6
+    del doc["params"]["min_coverage"]  # written before the key existed
+    assert persistence.from_document(doc)[0].params.min_coverage == 0.0
+    doc["params"]["min_coverage"] = 2.0
+    with pytest.raises(ProtocolError, match="min_coverage"):
+        persistence.from_document(doc)
 
 
 def test_graph_without_areas(tmp_path: Path) -> None:

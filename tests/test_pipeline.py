@@ -145,6 +145,37 @@ def test_nodes_doorways_and_areas_of_a_drive(model: PlaceModel, drive: Drive, la
     assert room_area[0].label == "room"
 
 
+def test_coverage_grows_as_the_local_map_fills_and_gates_the_votes(model: PlaceModel, drive: Drive) -> None:
+    front, full = scans(drive, "front"), scans(drive, "360")
+    p = Pipeline(model, PipelineParams())
+    steps = []
+    for i in range(len(front)):
+        x, y, th = drive.poses[i]
+        steps.append(p.process(front[i], Pose2D(x, y, th, stamp=front[i].stamp)))
+    cov = np.array([s.coverage for s in steps])
+    # a front laser alone covers half the turn; driving, the local map fills in the rear
+    assert 0.45 <= cov[0] <= 0.55
+    assert cov.max() >= 0.85
+    # the labels of scans below min_coverage abstained
+    first_vote = int(np.argmax(cov >= p.graph.params.min_coverage))
+    assert first_vote > 0
+    start = p.graph.node(1)
+    assert start.visits >= 1
+    before = Pipeline(model, PipelineParams())
+    for i in range(first_vote):
+        x, y, th = drive.poses[i]
+        before.process(front[i], Pose2D(x, y, th, stamp=front[i].stamp))
+    assert set(before.graph.recent) <= {None} and all(n.label is None for n in before.graph.place_nodes())
+    message = place_message(steps[0])
+    SCHEMAS.validate(message, "loci.place/1")
+    assert message["coverage"] == pytest.approx(cov[0], abs=1e-4)
+    # a 360° laser measures every beam: every label votes from the first scan
+    q = Pipeline(model, PipelineParams())
+    x, y, th = drive.poses[0]
+    r = q.process(full[0], Pose2D(x, y, th, stamp=full[0].stamp))
+    assert r.coverage == 1.0 and list(q.graph.recent) == [r.label]
+
+
 def test_the_same_inputs_give_the_same_documents(model: PlaceModel, drive: Drive) -> None:
     laser_scans = scans(drive, "front")
     docs = []

@@ -385,7 +385,15 @@ PLACE = MessageSchema(
             "label": _CLASS,
             "probabilities": mapping(_PROBABILITY, description="class → probability"),
         },
-        {"node": integer(minimum=0, nullable=True, description="the navigation node the robot is at")},
+        {
+            "node": integer(minimum=0, nullable=True, description="the navigation node the robot is at"),
+            "coverage": number(
+                minimum=0,
+                maximum=1,
+                description="share of the 360° scan's beams measured or hit in the local map "
+                "(the rest interpolated); below the graph's min_coverage the label does not vote",
+            ),
+        },
     ),
     description="the place the robot is in now: the classifier's class and probabilities",
 )

@@ -15,7 +15,14 @@ Rules (positions in the odometry frame, metres):
   to the node's vote counts, and its label is the class with most votes. A revisit with
   different evidence can therefore flip it; a tie keeps the current label. Labels in
   ``ignore_labels`` ("doorway" by default: doorways are their own nodes) do not enter the
-  window.
+  window. Labels of scans whose 360° view is mostly guessed abstain: with a front laser the
+  rear half is simulated from the local map (Sect. 3.5), and right after start-up (or
+  after a long stop) that map is empty and the rear beams are interpolated. Given the
+  scan's ``coverage`` (the share of its beams measured or hit in the local map), a label
+  votes only when ``coverage >= min_coverage`` (0.75 by default; a front laser alone gives
+  0.5); an abstaining scan keeps its slot in the window, so the window stays the last N
+  scans. A node reached while no label in the window may vote gets no votes then (a node
+  created so has no label until a later visit brings some).
 * **Doorway nodes** are added where the doorway detector
   (:class:`~knowledge.navigation.doorways.DoorwayDetector`) reports a passage, at the
   opening's centre, with its width and orientation. A doorway reported within
@@ -60,6 +67,8 @@ class GraphParams:
         door_merge: metres; a doorway reported this close to a doorway node is that node.
         link_radius: metres (None: ``1.5 × node_distance``); with a scan, a node the robot
             creates or reaches is also joined to the place nodes this close that it can see.
+        min_coverage: share of a scan's 360° beams that must be known (measured, or hit in
+            the local map) for its label to vote (0: every label votes).
     """
 
     node_distance: float = 1.0
@@ -68,6 +77,7 @@ class GraphParams:
     ignore_labels: tuple[str, ...] = ("doorway",)
     door_merge: float = 0.7
     link_radius: float | None = None
+    min_coverage: float = 0.75
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.node_distance) and self.node_distance > 0):
@@ -80,6 +90,12 @@ class GraphParams:
             raise ValueError(f"door_merge must be a positive number of metres, got {self.door_merge!r}")
         if self.link_radius is not None and not (math.isfinite(self.link_radius) and self.link_radius >= 0):
             raise ValueError(f"link_radius must be >= 0 metres or None, got {self.link_radius!r}")
+        if isinstance(self.min_coverage, bool) or not (
+            isinstance(self.min_coverage, int | float) and 0.0 <= self.min_coverage <= 1.0
+        ):
+            raise ValueError(
+                f"min_coverage must be a share of the beams in [0, 1] (0: every label votes), got {self.min_coverage!r}"
+            )
         object.__setattr__(self, "ignore_labels", tuple(str(v) for v in self.ignore_labels))
 
     @property
@@ -171,7 +187,8 @@ class NavigationGraph:
         self.params = params or GraphParams()
         self.nodes: dict[int, Node] = {}
         self._adj: dict[int, dict[int, float]] = {}
-        self.recent: deque[str] = deque(maxlen=self.params.window)
+        # the last N place labels; None for a scan whose label abstained (low coverage)
+        self.recent: deque[str | None] = deque(maxlen=self.params.window)
         self.current: int | None = None
         self._at: int | None = None
         self._next_id = 1
@@ -279,7 +296,7 @@ class NavigationGraph:
 
     def window_counts(self) -> Counter[str]:
         """Label counts of the current window of recent place labels."""
-        return Counter(self.recent)
+        return Counter(label for label in self.recent if label is not None)
 
     # ------------------------------------------------------------------ building
     def add_node(
@@ -412,6 +429,7 @@ class NavigationGraph:
         *,
         in_opening: bool = False,
         ranges: np.ndarray | None = None,
+        coverage: float | None = None,
     ) -> GraphUpdate:
         """Advance the graph by one scan.
 
@@ -427,6 +445,9 @@ class NavigationGraph:
                 node's opening. This joins a path that comes back beside its old track, e.g.
                 out of a door into a corridor a metre from the corridor's last node, which
                 would otherwise split the corridor into two areas.
+            coverage: the share of the scan's 360° beams that are known (measured, or hit in
+                the local map; :func:`knowledge.metric.rear_beams.assemble_scan`); below
+                ``min_coverage`` the label does not vote (None: it votes).
         """
         p = np.asarray(pose, dtype=np.float64)
         if p.shape != (3,) or not np.isfinite(p).all():
@@ -437,8 +458,13 @@ class NavigationGraph:
             if scan.ndim != 1 or scan.size < 3:
                 raise ValueError(f"ranges must be a 1-D 360° scan, got shape {scan.shape}")
         prm = self.params
+        if coverage is not None and not (math.isfinite(coverage) and 0.0 <= coverage <= 1.0):
+            raise ValueError(f"coverage must be a share of the beams in [0, 1], got {coverage!r}")
+        votes = coverage is None or coverage >= prm.min_coverage
         if label is not None and label not in prm.ignore_labels:
-            self.recent.append(str(label))
+            # an abstaining scan still takes its place in the window: the votes of the scans
+            # before it must not be counted again for a node reached later, elsewhere
+            self.recent.append(str(label) if votes else None)
         added: list[int] = []
         reached: list[int] = []
         relabelled: list[int] = []

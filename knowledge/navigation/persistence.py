@@ -6,10 +6,11 @@ The document (also the payload the agent publishes and answers queries with)::
       "schema": "loci.navgraph/1",
       "frame": "odom",                               # the frame of every position
       "params": {"node_distance": m, "reach": m | null, "window": N,
-                 "ignore_labels": [str], "door_merge": m},
+                 "ignore_labels": [str], "door_merge": m,
+                 "min_coverage": share},          # optional (documents before it: 0)
       "next_node_id": int,                          # ids are never reused
       "current": id | null,                         # the node the robot was last at
-      "recent_labels": [str],                       # the window of the last N place labels
+      "recent_labels": [str | null],                # the window of the last N place labels (null: abstained)
       "nodes": [{"id": int, "kind": "place" | "doorway", "x": m, "y": m,
                  "label": str | null, "votes": {label: count}, "visits": int,
                  "width": m | null, "orientation": rad | null}],
@@ -80,6 +81,7 @@ def to_document(
             "window": prm.window,
             "ignore_labels": list(prm.ignore_labels),
             "door_merge": prm.door_merge,
+            "min_coverage": prm.min_coverage,
         },
         "next_node_id": graph.next_id,
         "current": graph.current,
@@ -238,6 +240,8 @@ def _build(doc: dict[str, Any]) -> tuple[NavigationGraph, AreaMap | None]:
         window=_int(_get(p, "window", "params"), "params.window", 1),
         ignore_labels=tuple(str(_str(v, "params.ignore_labels[]")) for v in ignore),
         door_merge=_float(_get(p, "door_merge", "params"), "params.door_merge"),
+        # documents written before min_coverage existed: every label voted then
+        min_coverage=_float(p["min_coverage"], "params.min_coverage") if "min_coverage" in p else 0.0,
     )
     g = NavigationGraph(params)
     next_id = _int(_get(doc, "next_node_id", "the document"), "next_node_id", 1)
@@ -281,7 +285,7 @@ def _build(doc: dict[str, Any]) -> tuple[NavigationGraph, AreaMap | None]:
     if current is not None and (_int(current, "current") not in g.nodes):
         raise _Bad(f"current node {current} is not a node")
     labels = _list(_get(doc, "recent_labels", "the document"), "recent_labels")
-    g.recent.extend(str(_str(v, "recent_labels[]")) for v in labels[-params.window :])
+    g.recent.extend(_str(v, "recent_labels[]", optional=True) for v in labels[-params.window :])
     g.current = current
     g._next_id = next_id
     areas = _build_areas(doc, g)

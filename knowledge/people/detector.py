@@ -40,8 +40,8 @@ from knowledge.people.features import (
     FEATURE_CODES,
     FEATURES,
     N_FEATURES,
+    _features,
     feature_label,
-    segment_features,
 )
 from knowledge.people.segmentation import DEFAULT_JUMP, FloatArray, Segmentation, segment_scan
 from knowledge.places.boosting import STATE_ARRAYS, GeneralizedAdaBoost, booster_from_state
@@ -222,6 +222,28 @@ class LegDetector:
         no returns). ``previous``/``dt``: the previous scan of the same sensor and the seconds
         since, for C.14.
         """
+        return self._detect(
+            ranges,
+            angle_min,
+            angle_increment,
+            range_max=range_max,
+            range_min=range_min,
+            previous=previous,
+            dt=dt,
+        )[0]
+
+    def _detect(
+        self,
+        ranges: npt.ArrayLike,
+        angle_min: float,
+        angle_increment: float,
+        *,
+        range_max: float,
+        range_min: float = 0.0,
+        previous: npt.ArrayLike | None = None,
+        dt: float | None = None,
+    ) -> tuple[SegmentDetection, FloatArray]:
+        """:meth:`detect` and the centroids ``(S, 2)`` of all segments (metres, sensor frame)."""
         self._check_fitted()
         seg = segment_scan(
             ranges,
@@ -232,12 +254,14 @@ class LegDetector:
             jump=self.jump,
             max_gap=self.max_gap,
         )
-        X = segment_features(seg, range_max=range_max, range_min=range_min, previous=previous, dt=dt)
-        score = np.full(seg.n_segments, -np.inf)
-        big = self.classifies(seg.sizes, np.hypot(*seg.centroids().T) if seg.n_segments else None)
-        if big.any():
-            score[big] = self.booster_.decision_function(X[big][:, list(self.columns)])
-        return SegmentDetection(seg, X, score, score >= self.threshold)
+        X, centre = _features(seg, range_max=range_max, range_min=range_min, previous=previous, dt=dt)
+        S = X.shape[0]
+        score = np.full(S, -np.inf)
+        big = self.classifies(X[:, 0], np.hypot(centre[:, 0], centre[:, 1]) if S else None)
+        rows = np.flatnonzero(big)
+        if rows.size:
+            score[rows] = self.booster_.decision_function(X[rows[:, None], list(self.columns)])
+        return SegmentDetection(seg, X, score, score >= self.threshold), centre
 
     # -- inspection ----------------------------------------------------------------------
 

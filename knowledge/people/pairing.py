@@ -14,6 +14,7 @@ furniture, more missed people). The tracker then decides, over several scans, wh
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -62,24 +63,32 @@ def pair_legs(
     if lone_legs not in LONE_LEG_POLICIES:
         raise ValueError(f"lone_legs must be one of {LONE_LEG_POLICIES}, got {lone_legs!r}")
     K = L.shape[0]
-    pairs: list[tuple[int, int]] = []
-    used = np.zeros(K, dtype=bool)
+    rows: list[tuple[int, int]] = []
+    used = [False] * K
     if K >= 2:
-        i, j = np.triu_indices(K, k=1)
+        i, j = _upper_pairs(K)
         d = np.hypot(L[i, 0] - L[j, 0], L[i, 1] - L[j, 1])
-        close = d <= max_distance
-        i, j, d = i[close], j[close], d[close]
-        for k in np.argsort(d, kind="stable").tolist():
-            a, b = int(i[k]), int(j[k])
-            if not (used[a] or used[b]):
-                used[a] = used[b] = True
-                pairs.append((a, b))
-    rows = [(a, b) for a, b in pairs]
+        close = np.flatnonzero(d <= max_distance)
+        if close.size:
+            order = close[np.argsort(d[close], kind="stable")]
+            for a, b in zip(i[order].tolist(), j[order].tolist(), strict=True):
+                if not (used[a] or used[b]):
+                    used[a] = used[b] = True
+                    rows.append((a, b))
     if lone_legs == "person":
-        rows += [(int(a), -1) for a in np.flatnonzero(~used)]
-    idx = np.array(rows, dtype=np.intp).reshape(-1, 2)
-    if idx.shape[0] == 0:
-        return People(np.zeros((0, 2)), idx)
-    second = np.where(idx[:, 1:2] >= 0, L[np.maximum(idx[:, 1], 0)], L[idx[:, 0]])
-    positions = 0.5 * (L[idx[:, 0]] + second)
+        rows += [(a, -1) for a in range(K) if not used[a]]
+    if not rows:
+        return People(np.zeros((0, 2)), np.zeros((0, 2), dtype=np.intp))
+    idx = np.array(rows, dtype=np.intp)
+    second = np.where(idx[:, 1] >= 0, idx[:, 1], idx[:, 0])
+    positions = 0.5 * (L[idx[:, 0]] + L[second])
     return People(positions, idx)
+
+
+@functools.lru_cache(maxsize=64)
+def _upper_pairs(k: int) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+    """``(i, j)`` of all pairs ``i < j < k`` in row-major order (:func:`numpy.triu_indices`), read-only."""
+    i, j = np.triu_indices(k, k=1)
+    i.setflags(write=False)
+    j.setflags(write=False)
+    return i, j

@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import numpy.typing as npt
 
@@ -170,32 +171,61 @@ def segment_scan(
         raise ValueError(f"jump must be a positive distance in metres (the book uses 0.15), got {jump}")
     if max_gap is not None and (int(max_gap) != max_gap or max_gap < 0):
         raise ValueError(f"max_gap must be None or a number of beams >= 0, got {max_gap!r}")
-    index = np.flatnonzero(has_return(r, range_max, range_min)).astype(np.intp)
-    rr = r[index]
-    theta = angle_min + index * angle_increment
-    points = np.empty((index.size, 2))
-    points[:, 0] = rr * np.cos(theta)
-    points[:, 1] = rr * np.sin(theta)
-    if index.size == 0:
-        empty = np.zeros(0, dtype=np.intp)
-        return Segmentation(
-            r.size,
-            index,
-            rr,
-            points,
-            empty,
-            empty.copy(),
-            float(jump),
-            float(angle_min),
-            float(angle_increment),
-        )
-    d = points[1:] - points[:-1]
-    cut = (d[:, 0] ** 2 + d[:, 1] ** 2) > jump * jump
-    if max_gap is not None:
-        cut |= (index[1:] - index[:-1] - 1) > max_gap
-    brk = np.flatnonzero(cut) + 1
-    start = np.concatenate(([0], brk)).astype(np.intp)
-    stop = np.concatenate((brk, [index.size])).astype(np.intp)
+    gap = -1 if max_gap is None else min(int(max_gap), r.size)
+    index, rr, points, start, stop = _segment(
+        np.ascontiguousarray(r),
+        float(angle_min),
+        float(angle_increment),
+        float(range_max),
+        float(range_min),
+        float(jump),
+        gap,
+    )
     return Segmentation(
         r.size, index, rr, points, start, stop, float(jump), float(angle_min), float(angle_increment)
     )
+
+
+@numba.njit(cache=True, nogil=True)
+def _segment(
+    r: FloatArray,
+    angle_min: float,
+    angle_increment: float,
+    range_max: float,
+    range_min: float,
+    jump: float,
+    max_gap: int,
+) -> tuple[IntArray, FloatArray, FloatArray, IntArray, IntArray]:  # pragma: no cover - compiled
+    """The packed arrays of :class:`Segmentation` (``max_gap < 0``: no limit), in one pass."""
+    index = np.empty(r.shape[0], dtype=np.intp)
+    m = 0
+    for b in range(r.shape[0]):
+        d = r[b]
+        if math.isfinite(d) and d > 0.0 and d >= range_min and d < range_max:
+            index[m] = b
+            m += 1
+    index = index[:m].copy()
+    rr = np.empty(m)
+    points = np.empty((m, 2))
+    for k in range(m):
+        d = r[index[k]]
+        theta = angle_min + float(index[k]) * angle_increment
+        rr[k] = d
+        points[k, 0] = d * math.cos(theta)
+        points[k, 1] = d * math.sin(theta)
+    brk = np.empty(m + 1, dtype=np.intp)
+    brk[0] = 0
+    n_seg = 1 if m > 0 else 0
+    limit = jump * jump
+    for k in range(1, m):
+        ex = points[k, 0] - points[k - 1, 0]
+        ey = points[k, 1] - points[k - 1, 1]
+        if ex * ex + ey * ey > limit or (max_gap >= 0 and index[k] - index[k - 1] - 1 > max_gap):
+            brk[n_seg] = k
+            n_seg += 1
+    start = brk[:n_seg].copy()
+    stop = np.empty(n_seg, dtype=np.intp)
+    stop[: n_seg - 1] = brk[1:n_seg]
+    if n_seg:
+        stop[n_seg - 1] = m
+    return index, rr, points, start, stop

@@ -129,10 +129,23 @@ class TrackState:
         return float(np.hypot(*self.velocity))
 
 
-@dataclass
+@dataclass(slots=True)
 class _Track:
-    x: FloatArray
-    P: FloatArray
+    """A track's state in closed form. The tracker's covariance never couples the axes (``F``,
+    ``Q``, ``H``, ``R`` and the birth covariance are all block-diagonal in (x, vx) and (y, vy)),
+    so each axis keeps its 2×2 block ``[[a, b], [b, c]]`` (position variance, position–velocity
+    covariance, velocity variance); the 4×4 covariance has zeros elsewhere."""
+
+    px: float
+    py: float
+    vx: float
+    vy: float
+    ax: float
+    bx: float
+    cx: float
+    ay: float
+    by: float
+    cy: float
     born: float
     last_seen: float
     hits: int = 1
@@ -140,22 +153,65 @@ class _Track:
     age: int = 1
     id: int = 0  # 0 while tentative
 
-    @property
-    def confirmed(self) -> bool:
-        return self.id > 0
+    def predict(self, dt: float, q00: float, q01: float, q11: float) -> None:
+        """:func:`kalman_predict` over ``dt`` seconds with process noise ``[[q00, q01], [q01, q11]]`` per axis."""
+        self.px += dt * self.vx
+        self.py += dt * self.vy
+        a, b, c = self.ax, self.bx, self.cx
+        self.ax = (a + dt * b) + dt * (b + dt * c) + q00
+        self.bx = (b + dt * c) + q01
+        self.cx = c + q11
+        a, b, c = self.ay, self.by, self.cy
+        self.ay = (a + dt * b) + dt * (b + dt * c) + q00
+        self.by = (b + dt * c) + q01
+        self.cy = c + q11
 
-    def state(self) -> TrackState:
-        return TrackState(
-            id=self.id,
-            position=self.x[:2].copy(),
-            velocity=self.x[2:].copy(),
-            covariance=self.P.copy(),
-            hits=self.hits,
-            misses=self.misses,
-            age=self.age,
-            first_seen=self.born,
-            last_seen=self.last_seen,
-        )
+    def correct(self, zx: float, zy: float, r: float) -> None:
+        """:func:`kalman_update` with the position ``(zx, zy)`` of variance ``r`` per axis (Joseph form)."""
+        a, b, c = self.ax, self.bx, self.cx
+        s = a + r
+        kp, kv = a / s, b / s
+        e = zx - self.px
+        self.px += kp * e
+        self.vx += kv * e
+        g = 1.0 - kp
+        self.ax = g * a * g + r * kp * kp
+        self.bx = g * (b - kv * a) + r * kp * kv
+        self.cx = (c - kv * b) - kv * (b - kv * a) + r * kv * kv
+        a, b, c = self.ay, self.by, self.cy
+        s = a + r
+        kp, kv = a / s, b / s
+        e = zy - self.py
+        self.py += kp * e
+        self.vy += kv * e
+        g = 1.0 - kp
+        self.ay = g * a * g + r * kp * kp
+        self.by = g * (b - kv * a) + r * kp * kv
+        self.cy = (c - kv * b) - kv * (b - kv * a) + r * kv * kv
+
+
+def _assign(dist: list[list[float]], gate: float) -> list[tuple[int, int]]:
+    """The (row, column) pairs, by row, of the minimal-sum assignment of ``dist`` (rows ×
+    columns, at least 1 × 1) that are within ``gate``.
+
+    Pairs further than ``gate`` cost a large constant instead of their distance (Hungarian
+    method). Two cases need no Hungarian method. If no row and no column has two pairs within
+    the gate, every minimal assignment holds all of them (leaving one out costs the constant
+    minus its distance): they are the answer. A single row or column with a unique nearest
+    entry within the gate: the nearest is the optimum.
+    """
+    near = [(i, j) for i, row in enumerate(dist) for j, d in enumerate(row) if d <= gate]
+    if len({i for i, _ in near}) == len(near) == len({j for _, j in near}):
+        return near
+    if len(dist) == 1 or len(dist[0]) == 1:
+        flat = dist[0] if len(dist) == 1 else [row[0] for row in dist]
+        d = min(flat)
+        if flat.count(d) == 1:
+            k = flat.index(d)
+            return [(0, k)] if len(dist) == 1 else [(k, 0)]
+    cost = np.array(dist)
+    rows, cols = linear_sum_assignment(np.where(cost > gate, gate * 1e3 + 1.0, cost))
+    return [(r, c) for r, c in zip(rows.tolist(), cols.tolist(), strict=True) if cost[r, c] <= gate]
 
 
 class PeopleTracker:
@@ -166,6 +222,7 @@ class PeopleTracker:
         self._tracks: list[_Track] = []
         self._next_id = 1
         self._time: float | None = None
+        self._noise: tuple[tuple[float, float], float, float, float] = ((math.nan, math.nan), 0.0, 0.0, 0.0)
 
     @property
     def time(self) -> float | None:
@@ -179,8 +236,41 @@ class PeopleTracker:
 
     def tracks(self, *, include_tentative: bool = False) -> list[TrackState]:
         """Current confirmed tracks (and tentative ones, id 0, if asked), by id."""
-        out = [t.state() for t in self._tracks if t.confirmed or include_tentative]
-        return sorted(out, key=lambda s: (s.id == 0, s.id))
+        sel = [t for t in self._tracks if t.id > 0 or include_tentative]
+        if not sel:
+            return []
+        sel.sort(key=lambda t: (t.id == 0, t.id))
+        # one array for all states, one for all covariances: each state gets its own rows
+        X = np.array([(t.px, t.py, t.vx, t.vy) for t in sel])
+        C = np.array(
+            [
+                (t.ax, 0.0, t.bx, 0.0, 0.0, t.ay, 0.0, t.by, t.bx, 0.0, t.cx, 0.0, 0.0, t.by, 0.0, t.cy)
+                for t in sel
+            ]
+        ).reshape(-1, 4, 4)
+        return [
+            TrackState(
+                id=t.id,
+                position=X[k, :2],
+                velocity=X[k, 2:],
+                covariance=C[k],
+                hits=t.hits,
+                misses=t.misses,
+                age=t.age,
+                first_seen=t.born,
+                last_seen=t.last_seen,
+            )
+            for k, t in enumerate(sel)
+        ]
+
+    def _process_noise(self, dt: float) -> tuple[float, float, float]:
+        """The per-axis block ``(q00, q01, q11)`` of :func:`cv_process_noise` over ``dt``
+        (cached: scans mostly come at a fixed rate)."""
+        key = (dt, self.config.accel_std)
+        if self._noise[0] != key:
+            Q = cv_process_noise(dt, self.config.accel_std)
+            self._noise = (key, float(Q[0, 0]), float(Q[0, 2]), float(Q[2, 2]))
+        return self._noise[1:]
 
     def update(self, detections: npt.ArrayLike, t: float) -> list[TrackState]:
         """Advance to time ``t`` (seconds) with person positions ``(K, 2)``; returns the confirmed tracks."""
@@ -198,39 +288,40 @@ class PeopleTracker:
         if dt < 0:
             raise ValueError(f"time went backwards: update at t={t} after t={self._time}; call reset() first")
         self._time = t
-        if dt > 0:
+        if dt > 0 and self._tracks:
+            q00, q01, q11 = self._process_noise(dt)
             for tr in self._tracks:
-                tr.x, tr.P = kalman_predict(tr.x, tr.P, dt, cfg.accel_std)
-        free = np.ones(Z.shape[0], dtype=bool)
+                tr.predict(dt, q00, q01, q11)
+        zs: list[list[float]] = Z.tolist()
+        K = len(zs)
+        free = [True] * K
+        n_free = K
         seen: set[int] = set()
-        for group in (
-            [tr for tr in self._tracks if tr.confirmed],
-            [tr for tr in self._tracks if not tr.confirmed],
-        ):
-            cand = np.flatnonzero(free)
-            if not group or cand.size == 0:
+        r = cfg.meas_std**2
+        for confirmed in (True, False):
+            if n_free == 0:
+                break
+            group = [tr for tr in self._tracks if (tr.id > 0) == confirmed]
+            if not group:
                 continue
-            pred = np.array([tr.x[:2] for tr in group])
-            dist = np.hypot(pred[:, None, 0] - Z[None, cand, 0], pred[:, None, 1] - Z[None, cand, 1])
-            big = cfg.gate * 1e3 + 1.0
-            rows, cols = linear_sum_assignment(np.where(dist > cfg.gate, big, dist))
-            for r, c in zip(rows.tolist(), cols.tolist(), strict=True):
-                if dist[r, c] > cfg.gate:
-                    continue
-                tr = group[r]
-                z = Z[cand[c]]
-                tr.x, tr.P = kalman_update(tr.x, tr.P, z, cfg.meas_std)
+            cand = [k for k in range(K) if free[k]]
+            dist = [[math.hypot(tr.px - zs[k][0], tr.py - zs[k][1]) for k in cand] for tr in group]
+            for row, col in _assign(dist, cfg.gate):
+                tr = group[row]
+                k = cand[col]
+                tr.correct(zs[k][0], zs[k][1], r)
                 tr.hits += 1
                 tr.misses = 0
                 tr.last_seen = t
-                free[cand[c]] = False
+                free[k] = False
+                n_free -= 1
                 seen.add(id(tr))
         survivors: list[_Track] = []
         for tr in self._tracks:
             if id(tr) not in seen:
                 tr.misses += 1
             tr.age += 1
-            if tr.confirmed:
+            if tr.id > 0:
                 if tr.misses <= cfg.max_misses:
                     survivors.append(tr)
             elif tr.misses < cfg.tentative_misses:
@@ -238,12 +329,16 @@ class PeopleTracker:
                     tr.id = self._next_id
                     self._next_id += 1
                 survivors.append(tr)
-        for z in Z[free]:
-            P0 = np.diag([cfg.meas_std**2, cfg.meas_std**2, cfg.init_speed_std**2, cfg.init_speed_std**2])
-            tr = _Track(x=np.array([z[0], z[1], 0.0, 0.0]), P=P0, born=t, last_seen=t)
-            if cfg.confirm_hits <= 1:
-                tr.id = self._next_id
-                self._next_id += 1
-            survivors.append(tr)
+        if n_free:
+            p0 = cfg.meas_std**2
+            v0 = cfg.init_speed_std**2
+            for k in range(K):
+                if not free[k]:
+                    continue
+                tr = _Track(zs[k][0], zs[k][1], 0.0, 0.0, p0, 0.0, v0, p0, 0.0, v0, born=t, last_seen=t)
+                if cfg.confirm_hits <= 1:
+                    tr.id = self._next_id
+                    self._next_id += 1
+                survivors.append(tr)
         self._tracks = survivors
         return self.tracks()

@@ -3,7 +3,7 @@
 :class:`DialogueAgent` holds no socket: it reads the pipeline's map (``graph``, ``areas``)
 and a concepts store, and every method returns the messages to publish as
 :class:`Outgoing` ``(stream, message)`` pairs, so it is tested without a bus.
-:func:`run_dialogue` is the thin bus task around it (in :mod:`agent.runtime`).
+:func:`agent.dialogue_task.run_dialogue` is the thin bus task around it (in :mod:`agent.runtime`).
 
 Every ``loci.intent/1`` gets exactly one ``loci.say/1`` with ``in_reply_to`` = its id
 (status ``ok``, ``accepted`` for a task that goes on, or ``error`` with a ``reason``). Tasks
@@ -37,12 +37,12 @@ removes the doorway node (the areas are recomputed, their events go to the conce
 "yes" keeps it and it is never asked about again.
 
 Without the conceptual service (:mod:`agent.conceptual_service`, on with ``[conceptual]``)
-:class:`MemoryConcepts` keeps what was said and seen in memory, without reasoning.
+:class:`~agent.dialogue_memory.MemoryConcepts` keeps what was said and seen in memory,
+without reasoning.
 """
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import inspect
 import json
@@ -54,27 +54,22 @@ from collections.abc import Awaitable, Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, TypeVar
 
-from agent.bus.bridge import BusClosed
 from agent.dialogue.referring import answer_text, describe_target, kind_words
 from agent.dialogue.referring import with_article as _with_article
-from knowledge.errors import LociError, ProtocolError
+from agent.dialogue_memory import AREA_CLASSES, MemoryConcepts, class_of_words
+from knowledge.errors import LociError
 from knowledge.navigation.consistency import FalseDoorway, false_doorways, remove_doorway
 from knowledge.navigation.graph import PLACE, NavigationGraph
 from knowledge.navigation.planning import goal_in_area, plan, start_node
 from knowledge.topology.areas import (
-    AreaClassChanged,
-    AreaCreated,
     AreaEvent,
     AreaMap,
-    AreaRemoved,
     AreasMerged,
 )
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
 
-#: Classes an AREA's ``class`` may take (others, e.g. "doorway", are None).
-AREA_CLASSES = ("room", "corridor", "hallway")
 #: Turn rate of "look around", rad/s (a full turn takes 2π / this).
 LOOK_OMEGA = 0.6
 YES = frozenset({"yes", "y", "yeah", "yep", "yes there was", "there was", "correct", "right"})
@@ -107,134 +102,6 @@ class Concepts(Protocol):
     def request_reasoning(self) -> Any: ...
 
     def apply_area_events(self, events: Sequence[AreaEvent], labels: Mapping[int, str | None]) -> Any: ...
-
-
-# ---------------------------------------------------------------------------- memory concepts
-
-
-def class_of_words(words: str) -> str:
-    """Words as an ontology-like class name: "charging station" → "ChargingStation"."""
-    return "".join(w[:1].upper() + w[1:] for w in re.split(r"[\s_\-]+", words.strip()) if w)
-
-
-class MemoryConcepts:
-    """The concepts the dialogue needs, kept in memory without reasoning (no Java).
-
-    It offers both :class:`Concepts` (``submit`` runs the function at once) and the part of
-    ``knowledge.conceptual.ConceptualMap`` the dialogue calls (``set_area``, ``merge_areas``,
-    ``add_object``, ``assert_type``, ``assert_name``...). An asserted type becomes the
-    area's only type ("kitchen" → ``["Kitchen"]``); nothing is inferred.
-    """
-
-    def __init__(self) -> None:
-        self.areas: dict[int, dict[str, Any]] = {}
-        self.objects: dict[str, dict[str, Any]] = {}
-        self.version = 0
-
-    # ---- the service's side
-    def snapshot(self) -> dict[str, Any]:
-        areas: dict[str, Any] = {}
-        for aid, a in sorted(self.areas.items()):
-            objs = [
-                {"name": o["name"], "kind": o["kind"]}
-                for o in sorted(self.objects.values(), key=lambda o: o["name"])
-                if o["area"] == aid
-            ]
-            types = [a["type"]] if a.get("type") else []
-            areas[str(aid)] = {
-                "id": aid,
-                "class": a.get("class"),
-                "types": types,
-                "names": list(a.get("names", [])),
-                "objects": objs,
-                "asserted": {"types": dict(a.get("asserted_types", {})), "names": dict(a.get("by", {}))},
-                "inferred": [],
-            }
-        return {
-            "areas": areas,
-            "objects": {k: dict(v) for k, v in sorted(self.objects.items())},
-            "version": self.version,
-        }
-
-    def submit(self, fn: Callable[[Any], T]) -> Awaitable[T]:
-        fut: asyncio.Future[T] = asyncio.get_running_loop().create_future()
-        try:
-            fut.set_result(fn(self))
-        except Exception as exc:
-            fut.set_exception(exc)
-        return fut
-
-    def request_reasoning(self) -> None:
-        return None
-
-    def apply_area_events(self, events: Sequence[AreaEvent], labels: Mapping[int, str | None]) -> None:
-        for e in events:
-            if isinstance(e, AreasMerged):
-                for gone in e.absorbed:
-                    self.merge_areas(e.area_id, gone)
-            elif isinstance(e, AreaCreated):
-                self.set_area(e.area_id, labels.get(e.area_id, e.label))
-            elif isinstance(e, AreaClassChanged):
-                self.set_area(e.area_id, e.new)
-            elif isinstance(e, AreaRemoved) and e.cause != "merged":
-                self.remove_area(e.area_id)
-
-    # ---- the map's side
-    def _area(self, area: int) -> dict[str, Any]:
-        return self.areas.setdefault(int(area), {"class": None, "names": []})
-
-    def set_area(self, area: int, cls: str | None) -> None:
-        self._area(area)["class"] = cls if cls in AREA_CLASSES else None
-        self.version += 1
-
-    def remove_area(self, area: int) -> None:
-        self.areas.pop(int(area), None)
-        for name in [n for n, o in self.objects.items() if o["area"] == area]:
-            del self.objects[name]
-        self.version += 1
-
-    def merge_areas(self, keep: int, gone: int) -> None:
-        a, b = self._area(keep), self.areas.pop(int(gone), {})
-        for n in b.get("names", []):
-            if n not in a["names"]:
-                a["names"].append(n)
-        if not a.get("type") and b.get("type"):
-            a["type"] = b["type"]
-        for o in self.objects.values():
-            if o["area"] == gone:
-                o["area"] = keep
-        self.version += 1
-
-    def add_object(
-        self, name: str, kind: str, area: int, node: int | None, *, source: str = "camera"
-    ) -> None:
-        self._area(area)
-        self.objects[name] = {"name": name, "kind": kind, "area": int(area), "node": node, "source": source}
-        self.version += 1
-
-    def remove_object(self, name: str) -> None:
-        self.objects.pop(name, None)
-        self.version += 1
-
-    def assert_type(self, area: int, word: str, speaker: str) -> None:
-        a = self._area(area)
-        w = " ".join(word.lower().split())
-        if w in AREA_CLASSES:
-            a["class"] = w
-        else:
-            a["type"] = class_of_words(w)
-        a.setdefault("asserted_types", {})[speaker] = w
-        self.version += 1
-
-    def assert_name(self, area: int, name: str, speaker: str) -> None:
-        a = self._area(area)
-        n = " ".join(name.split())
-        if n not in a["names"]:
-            a["names"].append(n)
-        a.setdefault("by", {}).setdefault(speaker, [])
-        if n not in a["by"][speaker]:
-            a["by"][speaker].append(n)
-        self.version += 1
 
 
 # ---------------------------------------------------------------------------- the dialogue
@@ -964,83 +831,3 @@ def _adder(name: str, kind: str, area: int, node: int | None) -> Callable[[Any],
         return m.add_object(name, kind, area, node, source="camera")
 
     return add
-
-
-# ---------------------------------------------------------------------------- the bus task
-
-
-async def run_dialogue(
-    agent: DialogueAgent,
-    intents: Any,
-    statuses: Any,
-    publish: Callable[[Outgoing], None],
-    *,
-    period: float = 0.1,
-    registry: Any = None,
-    invalid: Callable[[], None] | None = None,
-) -> None:
-    """Serve the dialogue until cancelled.
-
-    Args:
-        agent: the dialogue.
-        intents: a subscription yielding raw intent payloads (``bytes``) via ``recv_batch``.
-        statuses: a subscription yielding decoded ``loci.base_status/1`` dicts, or None.
-        publish: publishes an :class:`Outgoing` (validates it).
-        period: seconds between :meth:`DialogueAgent.tick` calls.
-        registry: the schema registry (default ``agent.bus.schemas.SCHEMAS``).
-        invalid: called for each malformed intent (the runtime counts it).
-    """
-    if registry is None:
-        from agent.bus.schemas import SCHEMAS
-
-        registry = SCHEMAS
-
-    def send(out: Iterable[Outgoing]) -> None:
-        for o in out:
-            try:
-                publish(o)
-            except (ProtocolError, ValueError) as exc:  # a bug: say so, keep serving
-                log.error("could not publish on %s: %s (%s)", o.stream, exc, o.message)
-
-    async def serve_intents() -> None:
-        while True:
-            for payload in await intents.recv_batch(16):
-                try:
-                    intent = registry.decode(payload, "loci.intent/1")
-                except ProtocolError as exc:
-                    log.warning("dialogue/intent: dropped an invalid intent: %s", exc)
-                    if invalid is not None:
-                        invalid()
-                    reply = agent.error_for_raw(payload, str(exc))
-                    send([reply] if reply is not None else [])
-                    continue
-                send(await agent.handle(intent))
-
-    async def serve_statuses() -> None:
-        while True:
-            for status in await statuses.recv_batch(16):
-                send(agent.on_base_status(status))
-
-    async def ticks() -> None:
-        while True:
-            await asyncio.sleep(period)
-            send(await agent.tick())
-
-    tasks = [
-        asyncio.create_task(serve_intents(), name="dialogue intents"),
-        asyncio.create_task(ticks(), name="dialogue tick"),
-    ]
-    if statuses is not None:
-        tasks.append(asyncio.create_task(serve_statuses(), name="dialogue status"))
-    try:
-        done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_EXCEPTION)
-        for t in done:
-            exc = t.exception()
-            if exc is not None and not isinstance(exc, BusClosed):
-                raise exc
-    finally:
-        for t in tasks:
-            t.cancel()
-        for t in tasks:
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await t

@@ -84,7 +84,9 @@ from agent.bus.queryable import StateCell, StateQueryable
 from agent.bus.scene import areas_scene, graph_scene, people_scene
 from agent.bus.session import close_session, listening_endpoints, open_session
 from agent.config import AgentConfig
-from agent.dialogue_agent import DialogueAgent, MemoryConcepts, Outgoing, run_dialogue
+from agent.dialogue_agent import DialogueAgent, Outgoing
+from agent.dialogue_memory import MemoryConcepts
+from agent.dialogue_task import run_dialogue
 from agent.odom_sync import Matched, OdomSync
 from agent.pipeline import Pipeline, PipelineParams, StepResult, place_message
 from agent.recording.recorder import McapSink, Recorder, recording_metadata

@@ -19,7 +19,8 @@ import pytest
 from test_consistency import drive
 
 from agent.bus.schemas import SCHEMAS
-from agent.dialogue_agent import DialogueAgent, MemoryConcepts, Outgoing
+from agent.dialogue_agent import DialogueAgent, Outgoing
+from agent.dialogue_memory import MemoryConcepts
 from knowledge.navigation.graph import DOORWAY, PLACE, GraphParams, NavigationGraph
 from knowledge.navigation.planning import plan
 from knowledge.topology.areas import AreaCreated, AreaMap, AreasMerged

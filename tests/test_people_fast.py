@@ -2,9 +2,10 @@
 
 Segmentation, features C.1–C.14, detection and tracking were rewritten for speed (numba
 kernels, a closed-form Kalman filter). The implementations they replaced are kept below,
-verbatim but renamed, as the reference: the new code must give the same segments, the same
-features and positions (to 1e-9), the same classifications and the same tracks (ids, counts, hits, misses exactly; states to 1e-9),
-on random scans and detection sequences and on real scans (the agent benchmark's simulated
+verbatim but renamed, as the reference (the reference tracker steps with the matrix-form
+:func:`kalman_predict`/:func:`kalman_update` that the module still offers): the new code must
+give the same segments, the same features and positions (to 1e-9), the same classifications
+and the same tracks (ids, counts, hits, misses exactly; states to 1e-9), on random scans and detection sequences and on real scans (the agent benchmark's simulated
 drive, and the legs data when it is there).
 """
 
@@ -27,7 +28,7 @@ from knowledge.people.features import MAX_RADIUS, MOTION_COLUMN, N_FEATURES, seg
 from knowledge.people.pairing import LONE_LEG_POLICIES, People, pair_legs
 from knowledge.people.pipeline import PeoplePipeline, to_frame
 from knowledge.people.segmentation import FloatArray, Segmentation, has_return, segment_scan
-from knowledge.people.tracking import PeopleTracker, TrackerConfig, TrackState
+from knowledge.people.tracking import PeopleTracker, TrackerConfig, TrackState, kalman_predict, kalman_update
 
 # ----------------------------------------------------------------------------------------
 # The reference: the vectorised implementations as they were before the rewrite.
@@ -281,42 +282,6 @@ def ref_pair_legs(legs: npt.ArrayLike, *, max_distance: float = 0.6, lone_legs: 
     return People(positions, idx)
 
 
-def ref_cv_transition(dt: float) -> FloatArray:
-    F = np.eye(4)
-    F[0, 2] = F[1, 3] = dt
-    return F
-
-
-def ref_cv_process_noise(dt: float, accel_std: float) -> FloatArray:
-    q = accel_std**2
-    Q = np.zeros((4, 4))
-    for p, v in ((0, 2), (1, 3)):
-        Q[p, p] = q * dt**4 / 4
-        Q[p, v] = Q[v, p] = q * dt**3 / 2
-        Q[v, v] = q * dt**2
-    return Q
-
-
-def ref_kalman_predict(
-    x: FloatArray, P: FloatArray, dt: float, accel_std: float
-) -> tuple[FloatArray, FloatArray]:
-    F = ref_cv_transition(dt)
-    return F @ x, F @ P @ F.T + ref_cv_process_noise(dt, accel_std)
-
-
-def ref_kalman_update(
-    x: FloatArray, P: FloatArray, z: FloatArray, meas_std: float
-) -> tuple[FloatArray, FloatArray]:
-    H = np.zeros((2, 4))
-    H[0, 0] = H[1, 1] = 1.0
-    R = np.eye(2) * meas_std**2
-    S = H @ P @ H.T + R
-    K = np.linalg.solve(S, H @ P).T
-    x = x + K @ (z - H @ x)
-    IKH = np.eye(4) - K @ H
-    return x, IKH @ P @ IKH.T + K @ R @ K.T
-
-
 @dataclass
 class _RefTrack:
     x: FloatArray
@@ -378,7 +343,7 @@ class RefTracker:
         self._time = t
         if dt > 0:
             for tr in self._tracks:
-                tr.x, tr.P = ref_kalman_predict(tr.x, tr.P, dt, cfg.accel_std)
+                tr.x, tr.P = kalman_predict(tr.x, tr.P, dt, cfg.accel_std)
         free = np.ones(Z.shape[0], dtype=bool)
         seen: set[int] = set()
         for group in (
@@ -397,7 +362,7 @@ class RefTracker:
                     continue
                 tr = group[r]
                 z = Z[cand[c]]
-                tr.x, tr.P = ref_kalman_update(tr.x, tr.P, z, cfg.meas_std)
+                tr.x, tr.P = kalman_update(tr.x, tr.P, z, cfg.meas_std)
                 tr.hits += 1
                 tr.misses = 0
                 tr.last_seen = t

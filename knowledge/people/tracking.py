@@ -155,39 +155,47 @@ class _Track:
 
     def predict(self, dt: float, q00: float, q01: float, q11: float) -> None:
         """:func:`kalman_predict` over ``dt`` seconds with process noise ``[[q00, q01], [q01, q11]]`` per axis."""
-        self.px += dt * self.vx
-        self.py += dt * self.vy
-        a, b, c = self.ax, self.bx, self.cx
-        self.ax = (a + dt * b) + dt * (b + dt * c) + q00
-        self.bx = (b + dt * c) + q01
-        self.cx = c + q11
-        a, b, c = self.ay, self.by, self.cy
-        self.ay = (a + dt * b) + dt * (b + dt * c) + q00
-        self.by = (b + dt * c) + q01
-        self.cy = c + q11
+        self.px, self.vx, self.ax, self.bx, self.cx = _predict_axis(
+            self.px, self.vx, self.ax, self.bx, self.cx, dt, q00, q01, q11
+        )
+        self.py, self.vy, self.ay, self.by, self.cy = _predict_axis(
+            self.py, self.vy, self.ay, self.by, self.cy, dt, q00, q01, q11
+        )
 
     def correct(self, zx: float, zy: float, r: float) -> None:
         """:func:`kalman_update` with the position ``(zx, zy)`` of variance ``r`` per axis (Joseph form)."""
-        a, b, c = self.ax, self.bx, self.cx
-        s = a + r
-        kp, kv = a / s, b / s
-        e = zx - self.px
-        self.px += kp * e
-        self.vx += kv * e
-        g = 1.0 - kp
-        self.ax = g * a * g + r * kp * kp
-        self.bx = g * (b - kv * a) + r * kp * kv
-        self.cx = (c - kv * b) - kv * (b - kv * a) + r * kv * kv
-        a, b, c = self.ay, self.by, self.cy
-        s = a + r
-        kp, kv = a / s, b / s
-        e = zy - self.py
-        self.py += kp * e
-        self.vy += kv * e
-        g = 1.0 - kp
-        self.ay = g * a * g + r * kp * kp
-        self.by = g * (b - kv * a) + r * kp * kv
-        self.cy = (c - kv * b) - kv * (b - kv * a) + r * kv * kv
+        self.px, self.vx, self.ax, self.bx, self.cx = _correct_axis(
+            self.px, self.vx, self.ax, self.bx, self.cx, zx, r
+        )
+        self.py, self.vy, self.ay, self.by, self.cy = _correct_axis(
+            self.py, self.vy, self.ay, self.by, self.cy, zy, r
+        )
+
+
+Axis = tuple[float, float, float, float, float]
+
+
+def _predict_axis(
+    p: float, v: float, a: float, b: float, c: float, dt: float, q00: float, q01: float, q11: float
+) -> Axis:
+    """One axis of :func:`kalman_predict`: position ``p``, velocity ``v`` and their covariance
+    ``[[a, b], [b, c]]`` ``dt`` seconds ahead, with process noise ``[[q00, q01], [q01, q11]]``."""
+    return p + dt * v, v, (a + dt * b) + dt * (b + dt * c) + q00, (b + dt * c) + q01, c + q11
+
+
+def _correct_axis(p: float, v: float, a: float, b: float, c: float, z: float, r: float) -> Axis:
+    """One axis of :func:`kalman_update` (Joseph form): the state corrected with position ``z`` of variance ``r``."""
+    s = a + r
+    kp, kv = a / s, b / s
+    e = z - p
+    g = 1.0 - kp
+    return (
+        p + kp * e,
+        v + kv * e,
+        g * a * g + r * kp * kp,
+        g * (b - kv * a) + r * kp * kv,
+        (c - kv * b) - kv * (b - kv * a) + r * kv * kv,
+    )
 
 
 def _assign(dist: list[list[float]], gate: float) -> list[tuple[int, int]]:

@@ -70,12 +70,15 @@ class SegmentDetection:
         score: ``(S,)`` float64 strong-classifier output ``F``; −inf for segments the detector
             does not classify (fewer than ``min_points`` points, or beyond ``max_range``).
         is_person: ``(S,)`` bool, the segment is classified person.
+        centroids: ``(S, 2)`` centres of gravity of the segments, metres, sensor frame (None:
+            computed from the segmentation when asked).
     """
 
     segmentation: Segmentation
     features: FloatArray
     score: FloatArray
     is_person: npt.NDArray[np.bool_]
+    centroids: FloatArray | None = None
 
     @property
     def beam_labels(self) -> npt.NDArray[np.bool_]:
@@ -85,7 +88,8 @@ class SegmentDetection:
     @property
     def legs(self) -> FloatArray:
         """``(K, 2)`` centroids of the person segments in metres, sensor frame."""
-        return self.segmentation.centroids()[self.is_person]
+        centre = self.centroids if self.centroids is not None else self.segmentation.centroids()
+        return centre[self.is_person]
 
     @property
     def leg_scores(self) -> FloatArray:
@@ -222,28 +226,6 @@ class LegDetector:
         no returns). ``previous``/``dt``: the previous scan of the same sensor and the seconds
         since, for C.14.
         """
-        return self._detect(
-            ranges,
-            angle_min,
-            angle_increment,
-            range_max=range_max,
-            range_min=range_min,
-            previous=previous,
-            dt=dt,
-        )[0]
-
-    def _detect(
-        self,
-        ranges: npt.ArrayLike,
-        angle_min: float,
-        angle_increment: float,
-        *,
-        range_max: float,
-        range_min: float = 0.0,
-        previous: npt.ArrayLike | None = None,
-        dt: float | None = None,
-    ) -> tuple[SegmentDetection, FloatArray]:
-        """:meth:`detect` and the centroids ``(S, 2)`` of all segments (metres, sensor frame)."""
         self._check_fitted()
         seg = segment_scan(
             ranges,
@@ -261,7 +243,7 @@ class LegDetector:
         rows = np.flatnonzero(big)
         if rows.size:
             score[rows] = self.booster_.decision_function(X[rows[:, None], list(self.columns)])
-        return SegmentDetection(seg, X, score, score >= self.threshold), centre
+        return SegmentDetection(seg, X, score, score >= self.threshold, centre)
 
     # -- inspection ----------------------------------------------------------------------
 

@@ -127,11 +127,11 @@ class PeoplePipeline:
             t0, r0 = self._previous
             if r0.shape == r.shape and 0 < stamp - t0 <= MAX_MOTION_GAP:
                 prev, dt = r0, stamp - t0
-        det, centre = self.detector._detect(
+        det = self.detector.detect(
             r, angle_min, angle_increment, range_max=range_max, range_min=range_min, previous=prev, dt=dt
         )
         self._previous = (float(stamp), r)
-        legs = to_frame(centre[det.is_person], sensor_pose)  # = det.legs, without recomputing the centroids
+        legs = to_frame(det.legs, sensor_pose)
         people = pair_legs(legs, max_distance=self.pair_distance, lone_legs=self.lone_legs)
         tracks = self.tracker.update(people.positions, float(stamp))
         return PeopleFrame(float(stamp), det, legs, people, tracks)

@@ -80,7 +80,11 @@ STREAMS: dict[str, StreamSpec] = {
         ),
         StreamSpec("camera", "foxglove.CompressedImage", "driver → agent", Policy.DROP_OLDEST, "JPEG frames"),
         StreamSpec(
-            "place", "loci.place/1", "agent → all", Policy.DROP_OLDEST, "current class, probabilities, node"
+            "place",
+            "loci.place/1",
+            "agent → all",
+            Policy.DROP_OLDEST,
+            "current class, probabilities, node, coverage",
         ),
         StreamSpec("graph", "loci.graph/1", "agent → all", Policy.DROP_OLDEST, "the navigation graph"),
         StreamSpec(

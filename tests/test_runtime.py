@@ -283,7 +283,10 @@ def test_live_run_publishes_answers_records_and_replays_to_the_same_map(
         SCHEMAS.validate(message)
         assert message["frame_id"] == "odom"
     shown = [bool(m["legs"] or m["tracks"]) for m in people]
-    assert all(a or b for a, b in itertools.pairwise(shown))  # never two empty ones in a row
+    # an empty message only ever follows one with people (it clears the picture), so there
+    # are never more empty ones than others; not "never two in a row": the stream publishes
+    # with congestion control DROP, and a lost message between two empty ones joins them
+    assert shown.count(False) <= shown.count(True) + 1, shown
     assert seen.json("graph")[-1]["nodes"] == graph["nodes"] and seen.samples["graph/scene"]
     assert seen.json("areas")[-1]["areas"] == areas["areas"]
     diag = seen.json("diagnostics")

@@ -4,8 +4,10 @@ Segmentation, features C.1–C.14, detection and tracking were rewritten for spe
 kernels, a closed-form Kalman filter). The implementations they replaced are kept below,
 verbatim but renamed, as the reference (the reference tracker steps with the matrix-form
 :func:`kalman_predict`/:func:`kalman_update` that the module still offers): the new code must
-give the same segments, the same features and positions (to 1e-9), the same classifications
-and the same tracks (ids, counts, hits, misses exactly; states to 1e-9), on random scans and detection sequences and on real scans (the agent benchmark's simulated
+give the same segments, the same features (to 1e-9; in practice bit for bit except the last
+ulp of ``atan2`` in C.3/C.13), the same classifications and the same tracks (ids, counts,
+hits, misses exactly; states to 1e-9), on random scans and detection sequences and on real
+scans (the agent benchmark's simulated
 drive, and the legs data when it is there).
 """
 
@@ -497,15 +499,15 @@ def test_segmentation_and_features_equal_the_reference_on_random_scans(p: dict, 
     assert_same_features(X, ref_segment_features(ref, **fk))
     X2, centre = feat._features(ref, **fk)
     np.testing.assert_array_equal(X2, X)
-    np.testing.assert_allclose(centre, ref.centroids(), rtol=TOL, atol=TOL)
+    np.testing.assert_array_equal(centre, ref.centroids())
 
 
 @pytest.mark.parametrize("n", [1, 2, 7, 8, 9, 16, 17, 128, 129, 130, 257, 300, 1031, 3000])
-def test_group_sums_are_numpys_sums(n: int, rng: np.random.Generator) -> None:
-    """The kernel's sums are numpy's sums to rounding (numpy adds pairwise, the kernel in order)."""
+def test_group_sums_follow_numpys_summation_order(n: int, rng: np.random.Generator) -> None:
+    """The kernel's sums are numpy's ``reduceat`` sums bit for bit (pairwise order, recursion above 128)."""
     for scale in (1e-3, 1.0, 1e4):
         a = rng.normal(size=n) * scale + rng.normal() * scale
-        assert feat._group_sum(a, n) == pytest.approx(float(np.sum(a)), rel=1e-12, abs=1e-12 * scale * n)
+        assert feat._group_sum(a, n) == np.add.reduceat(a, [0])[0]
 
 
 @settings(max_examples=150, deadline=None)
@@ -522,7 +524,7 @@ def test_median_is_numpys_median(values: list[float]) -> None:
 
 
 def test_long_segments_and_degenerate_geometry_equal_the_reference() -> None:
-    """Walls of hundreds of points, exactly collinear points,
+    """Walls of hundreds of points (the pairwise sums' recursion), exactly collinear points,
     two-point and one-point segments, repeated ranges."""
     inc = 0.004363323129985824
     B = 1000
@@ -756,7 +758,7 @@ def test_pipeline_equals_the_reference_on_the_agents_drive(detector: LegDetector
         np.testing.assert_array_equal(frame.detection.is_person, d.is_person)
         np.testing.assert_allclose(frame.detection.score, d.score, rtol=TOL, atol=TOL)
         np.testing.assert_array_equal(frame.detection.beam_labels, d.beam_labels)
-        np.testing.assert_allclose(frame.people.positions, people, rtol=TOL, atol=TOL)
+        np.testing.assert_array_equal(frame.people.positions, people)
         assert_same_tracks(frame.tracks, tracker.update(people, float(scan.stamp)))
         n_tracks = max(n_tracks, len(frame.tracks))
         n_legs += int(d.is_person.sum())

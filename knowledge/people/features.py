@@ -3,10 +3,12 @@
 Every feature is a function of one segment's end points ``p_0 … p_{N−1}`` (metres, sensor
 frame, beam order) and returns one real number; :func:`segment_features` computes all of
 them for every segment of a :class:`~knowledge.people.segmentation.Segmentation` in one
-compiled pass (numba) over the segments. The features agree with the vectorised numpy
-formulas they replaced to rounding (tests/test_people_fast.py keeps that implementation as
-the reference and compares to 1e-9). Lengths are metres, angles radians, speeds metres per
-second.
+compiled pass (numba) over the segments. Its sums run in the order of numpy's grouped
+reductions (``np.add.reduceat`` for sums over a segment's points, ``np.bincount`` for sums
+over its steps and triples), so the features agree with the vectorised numpy formulas to
+the last bit, apart from the rounding of ``atan2`` in C.3 and C.13 (tests/test_people_fast.py
+keeps that implementation as the reference). Lengths are metres, angles radians, speeds
+metres per second.
 
 Where the printed formulas leave a choice, this module decides as follows:
 
@@ -104,12 +106,85 @@ def feature_label(column: int) -> str:
 
 
 @numba.njit(cache=True, nogil=True)
-def _group_sum(a: FloatArray, n: int) -> float:  # pragma: no cover - compiled
-    """``Σ a[:n]``, added in order."""
-    res = 0.0
-    for i in range(n):
-        res += a[i]
+def _block_sum(a: FloatArray, lo: int, n: int) -> float:  # pragma: no cover - compiled
+    """Sum of ``a[lo:lo + n]``, ``n ≤ 128``, in the order of numpy's pairwise summation:
+    sequential below 8 values, else 8 interleaved accumulators."""
+    if n < 8:
+        res = -0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i = 8
+    while i < n - n % 8:
+        j = lo + i
+        r0 += a[j]
+        r1 += a[j + 1]
+        r2 += a[j + 2]
+        r3 += a[j + 3]
+        r4 += a[j + 4]
+        r5 += a[j + 5]
+        r6 += a[j + 6]
+        r7 += a[j + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i]
+        i += 1
     return res
+
+
+@numba.njit(cache=True, nogil=True)
+def _half(n: int) -> int:  # pragma: no cover - compiled
+    """Where numpy's pairwise summation splits ``n > 128`` values: about half, a multiple of 8."""
+    n2 = n // 2
+    return n2 - n2 % 8
+
+
+@numba.njit(cache=True, nogil=True)
+def _pairwise_sum(a: FloatArray, lo: int, n: int) -> float:  # pragma: no cover - compiled
+    """Sum of ``a[lo:lo + n]`` in numpy's pairwise order: blocks of at most 128 values summed
+    by :func:`_block_sum`, halves added recursively. The recursion runs on an explicit stack
+    (numba's on-disk cache crashes on recursive functions, numba issue #6061)."""
+    if n <= 128:
+        return _block_sum(a, lo, n)
+    los = np.empty(64, dtype=np.int64)
+    ns = np.empty(64, dtype=np.int64)
+    left_done = np.zeros(64, dtype=np.bool_)
+    left = np.empty(64)
+    top = 0
+    los[0] = lo
+    ns[0] = n
+    while True:
+        if ns[top] > 128:  # descend into the left half
+            left_done[top] = False
+            los[top + 1] = los[top]
+            ns[top + 1] = _half(ns[top])
+            top += 1
+            continue
+        v = _block_sum(a, los[top], ns[top])
+        while True:  # hand v up to the parents
+            if top == 0:
+                return v
+            top -= 1
+            if not left_done[top]:  # v is the left half: now the right one
+                left[top] = v
+                left_done[top] = True
+                n2 = _half(ns[top])
+                los[top + 1] = los[top] + n2
+                ns[top + 1] = ns[top] - n2
+                top += 1
+                break
+            v = left[top] + v
+
+
+@numba.njit(cache=True, nogil=True)
+def _group_sum(a: FloatArray, n: int) -> float:  # pragma: no cover - compiled
+    """``Σ a[:n]`` exactly as ``np.add.reduceat`` sums a group: first value + pairwise sum of the rest."""
+    if n == 1:
+        return float(a[0])
+    return float(a[0] + _pairwise_sum(a, 1, n - 1))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -189,7 +264,7 @@ def _features_kernel(
     with_prev: bool,
 ) -> tuple[FloatArray, FloatArray]:  # pragma: no cover - compiled
     """Features ``(S, 14)`` and centres of gravity ``(S, 2)`` of every segment, one segment at
-    a time; ``prev``/``dt`` are used only
+    a time (sums in numpy's order, see the module doc); ``prev``/``dt`` are used only
     ``with_prev``."""
     S = start.shape[0]
     out = np.zeros((S, 14))

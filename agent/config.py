@@ -41,6 +41,7 @@ from typing import Any, TypeVar
 
 from agent.bus.keys import robot_name
 from agent.bus.session import DEFAULT_AGENT_ENDPOINT, BusConfig
+from agent.odom_sync import SyncParams
 from knowledge.errors import ConfigError
 from knowledge.metric.local_map import LocalMapParams
 from knowledge.metric.rear_beams import FullScanParams
@@ -176,28 +177,28 @@ class LaserConfig:
 
 
 @dataclass(frozen=True)
-class OdometryConfig:
+class OdometryConfig(SyncParams):
     """``[odometry]``: how each scan gets the robot's pose at its stamp.
 
-    Attributes:
-        source: ``"bus"``: subscribe ``loci/<robot>/odom`` (the only source so far).
-        max_wait: seconds a scan waits for odometry newer than its stamp; then it is dropped
-            (counted as ``no_odometry``).
-        max_gap: seconds; a scan between two odometry samples farther apart than this is
-            dropped (``odom_gap``) instead of interpolated across the gap.
+    ``source`` is ``"bus"``: subscribe ``loci/<robot>/odom`` (the only source so far). The
+    other keys are :class:`~agent.odom_sync.SyncParams` (``max_wait``, ``max_gap``,
+    ``still``, ``max_extrapolation``, ``max_future``, ``reorder``, ``horizon``,
+    ``max_pending``): how long a scan waits for odometry, across which gaps it is
+    interpolated, how far it may be extrapolated, how far ahead a stamp may be, and how long
+    scans are held to put late ones in order (docs/agent.md has the table).
     """
 
     source: str = "bus"
-    max_wait: float = 0.2
-    max_gap: float = 0.5
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         if self.source != "bus":
             raise ValueError(f"source must be 'bus' (loci/<robot>/odom), got {self.source!r}")
-        if not (math.isfinite(self.max_wait) and self.max_wait > 0):
-            raise ValueError(f"max_wait must be > 0 seconds, got {self.max_wait}")
-        if not (math.isfinite(self.max_gap) and self.max_gap > 0):
-            raise ValueError(f"max_gap must be > 0 seconds, got {self.max_gap}")
+
+    @property
+    def sync(self) -> SyncParams:
+        """The association parameters alone (what recordings store)."""
+        return SyncParams.from_table(self.to_table())
 
 
 @dataclass(frozen=True)

@@ -162,11 +162,10 @@ def _percentiles(values: deque[float]) -> dict[str, float]:
 class AgentReport:
     """What a run did (returned by :meth:`Agent.run`, printed by ``loci run`` at exit).
 
-    ``drops`` holds the scans (or samples) lost for lack of capacity or time: ``driver``
-    (the LMS driver's queue), ``scan_queue``, ``odom_queue`` (bus subscriptions),
-    ``no_odometry``, ``odom_gap``, ``overflow`` (:class:`~agent.odom_sync.OdomSync`); scans
-    dropped for deterministic reasons (``before_odometry``, ``out_of_order``, ``unfinished``)
-    are in ``sync``.
+    ``drops`` holds the scans (or samples) not processed, by named reason: ``driver`` (the
+    LMS driver's queue), ``scan_queue``, ``odom_queue`` (bus subscriptions), and every reason
+    of :data:`~agent.odom_sync.DROP_REASONS` (``no_odometry``, ``odom_gap``, ``late``,
+    ``future_stamp``, ...); ``sync`` has all of :class:`~agent.odom_sync.OdomSync`'s counters.
     """
 
     robot: str
@@ -212,7 +211,7 @@ class Agent:
         self.keys = RobotKeys(self.robot)
         self.stats = BusStats()
         self.params = PipelineParams.from_config(config)
-        self.sync = OdomSync(max_wait=config.odometry.max_wait, max_gap=config.odometry.max_gap)
+        self.sync = OdomSync(config.odometry.sync)
         self.report = AgentReport(self.robot)
         self.endpoints: list[str] = []
         self.session: zenoh.Session | None = None
@@ -308,8 +307,7 @@ class Agent:
             model=str(model_path),
             model_sha256=file_sha256(model_path) if model_path.is_file() else "",
             initial_state=persistence.dumps(self._initial_state) if self._initial_state else "",
-            max_wait=cfg.odometry.max_wait,
-            max_gap=cfg.odometry.max_gap,
+            sync=json.dumps(cfg.odometry.sync.to_table(), sort_keys=True),
             laser_source=cfg.laser.source,
         )
 
@@ -506,7 +504,7 @@ class Agent:
             await asyncio.sleep(TICK)
             self._drain_odometry()
             before = self.sync.stats.no_odometry
-            self.sync.expire(time.time())
+            self._feed(self.sync.expire(time.time()))
             if self.sync.stats.no_odometry > before and time.monotonic() - self._warned_no_odom > 10.0:
                 self._warned_no_odom = time.monotonic()
                 log.warning(
@@ -800,7 +798,7 @@ class Agent:
             ):
                 await asyncio.sleep(TICK / 2)
                 self._drain_odometry()
-                self.sync.expire(time.time())
+                self._feed(self.sync.expire(time.time()))
             for name in ("housekeeping", "diagnostics", "odometry", "dialogue", "camera"):
                 await _cancel(tasks.get(name))
             for sub in (self._intent_sub, self._status_sub, self._camera_sub):
@@ -809,7 +807,7 @@ class Agent:
             await self._close_concepts()
             if self._odom_sub is not None:
                 self._odom_sub.close()
-            self.sync.close()
+            self._feed(self.sync.close())
             if self.pipeline is not None and (self._dirty or self.pipeline.scans):
                 await self._save()
             self._fill_report()
@@ -853,9 +851,7 @@ class Agent:
             "driver": self._lms.stats.dropped if self._lms is not None else 0,
             "scan_queue": snap.get("scan", {}).get("dropped", 0) if self._scan_sub is not None else 0,
             "odom_queue": snap.get("odom", {}).get("dropped", 0),
-            "no_odometry": s.no_odometry,
-            "odom_gap": s.odom_gap,
-            "overflow": s.overflow,
+            **s.drops(),
         }
         r.sync = s.as_dict()
         r.invalid = {k: v["invalid"] for k, v in snap.items() if v.get("invalid")}

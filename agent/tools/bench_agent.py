@@ -227,7 +227,7 @@ def bench_latency(
         for i in range(len(chunk))
     ]
     pipeline = Pipeline(model)
-    sync = OdomSync(max_wait=0.2, max_gap=0.5)
+    sync = OdomSync()
     parser = StreamParser("reply")
     codec = json_codec("loci.place/1")
     n = len(chunk)
@@ -349,7 +349,7 @@ class RateProbe:
         snap = self.agent.stats.snapshot()
         s = self.agent.sync.stats
         scan, odom = snap.get("scan", {}), snap.get("odom", {})
-        dropped = scan.get("dropped", 0) + odom.get("dropped", 0) + s.no_odometry + s.odom_gap + s.overflow
+        dropped = scan.get("dropped", 0) + odom.get("dropped", 0) + s.dropped
         processed = self.agent.pipeline.scans if self.agent.pipeline is not None else 0
         return Counters(self.sent, scan.get("received", 0), dropped, processed)
 

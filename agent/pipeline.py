@@ -7,7 +7,11 @@ scan's stamp (:mod:`agent.odom_sync`) and runs, in this order:
    graph nodes included, is the laser's, in the odometry frame);
 1a. people (``[people]``, on by default): the leg detector, leg pairing and tracking of
    :class:`~knowledge.people.pipeline.PeoplePipeline` on the scan as measured, tracks in the
-   odometry frame (:attr:`StepResult.people`); with ``mask`` the beams of detected legs
+   odometry frame (:attr:`StepResult.people`); with ``mask`` the beams of the legs of
+   people tracked walking (a confirmed track that moved ``min_travel`` from where it was
+   born, :func:`~knowledge.people.masking.tracked_legs`, whose legs do not stand on cells
+   the laser has hit for seconds, :class:`~knowledge.people.static.StaticCells`: furniture
+   taken for legs stays put)
    (:func:`~knowledge.people.masking.person_beams`) are hidden: the classifier's scan gets
    the walls behind them continued (:func:`~knowledge.people.masking.fill_masked`), the
    local map gets no information there (:func:`~knowledge.people.masking.unknown_masked`);
@@ -51,14 +55,15 @@ import numpy as np
 
 from agent.config import AgentConfig, build_dataclass, dataclass_table
 from drivers.messages import LaserScan, Pose2D
-from knowledge.metric.local_map import LocalMap, LocalMapParams
+from knowledge.metric.local_map import LocalMap, LocalMapParams, beam_endpoints
 from knowledge.metric.rear_beams import FullScanParams, assemble_scan
 from knowledge.navigation import persistence
 from knowledge.navigation.doorways import Doorway, DoorwayDetector, DoorwayParams, scan_points
 from knowledge.navigation.graph import DOORWAY, GraphParams, GraphUpdate, NavigationGraph
 from knowledge.people.detector import LegDetector
-from knowledge.people.masking import fill_masked, person_beams, unknown_masked
+from knowledge.people.masking import fill_masked, person_beams, tracked_legs, unknown_masked
 from knowledge.people.pipeline import PeopleFrame, PeoplePipeline
+from knowledge.people.static import StaticCells
 from knowledge.places.model import PlaceModel
 from knowledge.topology.areas import AreaEvent, AreaMap
 
@@ -95,6 +100,10 @@ class PeopleParams:
             :func:`~knowledge.people.masking.person_beams`).
         clearance: metres; only legs standing this much in front of what is beside them
             are masked (:func:`~knowledge.people.masking.free_standing`; 0: every leg).
+        min_travel: metres; only the legs of a confirmed track that has moved this far from
+            where it was born are masked (:func:`~knowledge.people.masking.tracked_legs`):
+            furniture the leg detector takes for legs never moves. None: every detected leg
+            (on real office scans that masked beams in 78 % of the scans; docs/real_logs.md).
         doorways: what a 360° laser's doorway detector sees where legs were (:data:`DOORWAY_INPUTS`).
     """
 
@@ -102,6 +111,7 @@ class PeopleParams:
     mask: bool = True
     margin: int = 1
     clearance: float = 0.2
+    min_travel: float | None = 1.0
     doorways: str = "raw"
 
     def __post_init__(self) -> None:
@@ -109,6 +119,8 @@ class PeopleParams:
             raise ValueError(f"margin must be a number of beams >= 0, got {self.margin}")
         if not (math.isfinite(self.clearance) and self.clearance >= 0):
             raise ValueError(f"clearance must be a distance >= 0 metres, got {self.clearance}")
+        if self.min_travel is not None and not (math.isfinite(self.min_travel) and self.min_travel >= 0):
+            raise ValueError(f"min_travel must be None or a distance >= 0 metres, got {self.min_travel}")
         if self.doorways not in DOORWAY_INPUTS:
             raise ValueError(f"doorways must be one of {DOORWAY_INPUTS}, got {self.doorways!r}")
 
@@ -296,6 +308,7 @@ class Pipeline:
         self.local_map = LocalMap(self.params.local_map)
         pp = self.params.people
         self.people: PeoplePipeline | None = PeoplePipeline(people_detector) if pp.enabled else None
+        self._static = StaticCells()  # what has stood still: furniture legs are not masked
         self.detector = DoorwayDetector(self.params.doorways)
         self.graph = graph if graph is not None else NavigationGraph(self.params.graph)
         self.areas = areas if areas is not None else AreaMap()
@@ -336,7 +349,24 @@ class Pipeline:
             )
             pp = self.params.people
             if pp.mask:
-                m = person_beams(frame.detection, margin=pp.margin, clearance=pp.clearance or None)
+                walking = None
+                if pp.min_travel is not None:
+                    self._static.update(
+                        beam_endpoints(
+                            raw, angles, sensor, range_max=scan.range_max, range_min=scan.range_min
+                        ),
+                        scan.stamp,
+                    )
+                    walking = tracked_legs(
+                        frame.detection,
+                        frame.legs,
+                        frame.tracks,
+                        min_travel=pp.min_travel,
+                        standing=self._static.static(frame.legs) if frame.legs.shape[0] else None,
+                    )
+                m = person_beams(
+                    frame.detection, margin=pp.margin, clearance=pp.clearance or None, persons=walking
+                )
                 if m.any():
                     mask = m
                     cls_r = fill_masked(
@@ -511,4 +541,9 @@ def place_message(result: StepResult) -> dict[str, Any]:
         "probabilities": dict(result.probabilities),
         "node": result.node,
         "coverage": round(result.coverage, 4),
+        "pose": {
+            "x": round(result.pose.x, 4),
+            "y": round(result.pose.y, 4),
+            "theta": round(result.pose.theta, 5),
+        },
     }

@@ -19,6 +19,7 @@ from drivers.sim.people import SimPerson
 from drivers.sim.tour import FOLLOW_DISTANCE, TourWorld, tour_world
 from knowledge.people.detector import LegDetector, SegmentDetection
 from knowledge.people.masking import fill_masked, free_standing, person_beams, unknown_masked
+from knowledge.people.static import StaticCells, StaticParams
 from knowledge.places.model import PlaceModel, default_model_path
 
 INC = math.pi / 360  # 0.5°
@@ -138,6 +139,49 @@ def test_no_return_neighbours_count_as_range_max_and_circular_scans_wrap() -> No
         fill_masked(r, m[:-1], range_max=30.0)
     with pytest.raises(ValueError, match="same length"):
         unknown_masked(r, m[:-1])
+
+
+# ------------------------------------------------------------------------------ what stood still
+def test_static_cells_tell_what_the_laser_has_hit_for_seconds() -> None:
+    cells = StaticCells(StaticParams(settle=3.0, forget=2.0))
+    table_leg, walker = np.array([1.0, 1.0]), np.array([3.0, 0.0])
+    for k in range(40):  # 4 s at 10 Hz: the table leg is hit all along, the walker moves
+        t = 10.0 + 0.1 * k
+        cells.update(np.array([table_leg, walker + np.array([0.2 * k, 0.0])]), t)
+        assert cells.static(table_leg[None])[0] == (t - 10.0 >= 3.0)
+        assert not cells.static((walker + np.array([0.2 * k, 0.0]))[None])[0]
+    # not hit for longer than forget: it starts afresh (a person who stood there and left)
+    cells.update(np.zeros((0, 2)), 16.5)
+    cells.update(table_leg[None], 16.6)
+    assert not cells.static(table_leg[None])[0] and len(cells) == 1
+
+
+def test_furniture_legs_the_robot_drives_past_are_not_masked() -> None:
+    """A table's four legs beside a corridor the robot drives along: taken for legs by the
+    detector and tracked, but they never walk and stand where the laser has seen them for
+    seconds, so no beam is masked; masking every detected leg (min_travel None) masks them."""
+    model = PlaceModel.load(default_model_path())
+    legs = np.array([[4.0, 0.9], [4.6, 0.9], [4.0, 0.3], [4.6, 0.3]])
+
+    def drive(people: PeopleParams) -> tuple[int, int]:
+        pipeline = Pipeline(model, PipelineParams(people=people))
+        masked = detected = 0
+        for k in range(60):  # 6 s at 10 Hz, 0.1 m per scan
+            t, x = 0.1 * k, 0.1 * k
+            r = np.minimum(corridor_ranges(1.6), 30.0)
+            r = np.minimum(r, ray_circle_ranges((x, 0.0), ANGLES, legs, np.full(4, 0.04)))
+            res = pipeline.process(
+                LaserScan(t, k, "laser", -math.pi / 2, INC, 30.0, r.astype(np.float32)),
+                Pose2D(x, 0.0, 0.0, stamp=t),
+            )
+            assert res.people is not None
+            detected += bool(res.people.legs.shape[0])
+            masked += res.masked is not None
+        return detected, masked
+
+    detected, masked = drive(PeopleParams())
+    assert detected >= 10 and masked == 0
+    assert drive(PeopleParams(min_travel=None))[1] >= 10
 
 
 # ------------------------------------------------------------------------------ the tour

@@ -253,8 +253,9 @@ def test_mount_and_stamp_order() -> None:
 
 
 def test_people_come_with_every_step_and_the_parameters_round_trip() -> None:
-    """A person 1.5 m ahead in a 360° scan of a round room: detected, tracked in the odometry
-    frame, masked from the classifier's scan (which then equals the empty room's)."""
+    """A person walks across a round room, 0.15 m per scan, 1.5 m ahead of a 360° laser:
+    detected, tracked in the odometry frame, and once the track has walked ``min_travel``
+    masked from the classifier's scan (which then equals the empty room's)."""
     from drivers.sim.lms_world import ray_circle_ranges
     from knowledge.errors import ConfigError
     from knowledge.people.pipeline import PeopleFrame
@@ -263,17 +264,21 @@ def test_people_come_with_every_step_and_the_parameters_round_trip() -> None:
     n, inc = 720, math.pi / 360
     angles = inc * np.arange(n)
     room = np.full(n, 4.0)
-    legs = np.array([[1.5, 0.12], [1.55, -0.12]])
-    seen = np.minimum(room, ray_circle_ranges((0.0, 0.0), angles, legs, np.full(2, 0.06)))
     with_people = Pipeline(model)
     without = Pipeline(model, PipelineParams(people=PeopleParams(enabled=False)))
     empty = Pipeline(model, PipelineParams(people=PeopleParams(enabled=False)))
-    for k in range(5):
+    masked_at = []
+    for k in range(14):
         t = 100.0 + 0.1 * k
+        legs = np.array([[1.5, 0.12], [1.55, -0.12]]) + np.array([0.0, 0.15 * k - 1.0])
+        seen = np.minimum(room, ray_circle_ranges((0.0, 0.0), angles, legs, np.full(2, 0.06)))
         odom = Pose2D(2.0, 1.0, math.pi / 2, stamp=t)  # the laser looks along +y of the odometry frame
         r = with_people.process(LaserScan(t, k, "laser", 0.0, inc, 30.0, seen.astype(np.float32)), odom)
         b = without.process(LaserScan(t, k, "laser", 0.0, inc, 30.0, seen.astype(np.float32)), odom)
         e = empty.process(LaserScan(t, k, "laser", 0.0, inc, 30.0, room.astype(np.float32)), odom)
+        masked_at.append(r.masked is not None)
+    # masked from the scan on which the track had walked 1 m (confirmed after 3 scans)
+    assert masked_at[:5] == [False] * 5 and all(masked_at[-4:])
     assert b.people is None and b.masked is None
     assert isinstance(r.people, PeopleFrame) and r.masked is not None
     hit = seen < room - 0.05
@@ -282,7 +287,7 @@ def test_people_come_with_every_step_and_the_parameters_round_trip() -> None:
     assert np.abs(b.ranges - e.ranges).max() > 1.0  # without masking it saw the legs
     assert len(r.people.people) == 1
     x, y = r.people.people.positions[0]
-    assert (x, y) == pytest.approx((2.0, 2.5), abs=0.1)  # 1.5 m ahead of the laser, odometry frame
+    assert (x, y) == pytest.approx((2.0 - 0.95, 2.5), abs=0.1)  # 1.5 m ahead of the laser, odometry frame
     SCHEMAS.validate(r.people.to_json("odom"))
     # parameters: in the recordings' table, and old tables (before people) mean people off
     params = PipelineParams(people=PeopleParams(mask=False, doorways="unknown"))

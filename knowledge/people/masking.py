@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 import operator
+from collections.abc import Sequence
 from functools import lru_cache
 
 import numba
@@ -36,8 +37,9 @@ import numpy.typing as npt
 
 from knowledge.people.detector import SegmentDetection
 from knowledge.people.segmentation import BoolArray, FloatArray
+from knowledge.people.tracking import TrackState
 
-__all__ = ["fill_masked", "free_standing", "person_beams", "unknown_masked"]
+__all__ = ["fill_masked", "free_standing", "person_beams", "tracked_legs", "unknown_masked"]
 
 #: Unmasked beams on each side of a masked run whose end points define the wall behind it.
 WALL_POINTS = 4
@@ -50,6 +52,37 @@ def _kernel_array(a: npt.NDArray[np.generic], dtype: type[np.generic]) -> npt.ND
     that every call reaches the same compiled signature of a kernel."""
     out = np.ascontiguousarray(a, dtype=dtype)
     return out if out.flags.writeable else out.copy()
+
+
+def tracked_legs(
+    detection: SegmentDetection,
+    legs: FloatArray,
+    tracks: Sequence[TrackState],
+    *,
+    min_travel: float,
+    radius: float = 0.6,
+    standing: BoolArray | None = None,
+) -> BoolArray:
+    """``(S,)`` bool: the person segments of ``detection`` that belong to a person who walks.
+
+    A segment counts when its leg (``legs``: the person segments' centroids in the tracking
+    frame, in order, as :attr:`~knowledge.people.pipeline.PeopleFrame.legs`) lies within
+    ``radius`` metres of a confirmed track that has travelled at least ``min_travel`` metres
+    from where it was born, and is not ``standing`` (``(K,)`` bool per leg, e.g. on cells the
+    laser has hit for seconds, :class:`~knowledge.people.static.StaticCells`). Time is what
+    tells a leg from a table leg: furniture the detector takes for legs stays where it is,
+    and masking it would hide part of the room from the place classifier and the local map.
+    """
+    out = np.zeros(detection.is_person.shape, dtype=bool)
+    walking = np.array([t.position for t in tracks if t.travelled >= min_travel], dtype=np.float64)
+    if walking.size == 0 or legs.shape[0] == 0:
+        return out
+    d = np.hypot(legs[:, None, 0] - walking[None, :, 0], legs[:, None, 1] - walking[None, :, 1])
+    near = d.min(axis=1) <= radius
+    if standing is not None:
+        near &= ~np.asarray(standing, dtype=bool)
+    out[np.flatnonzero(detection.is_person)] = near
+    return out
 
 
 def free_standing(detection: SegmentDetection, clearance: float) -> BoolArray:
@@ -104,13 +137,21 @@ def _free_standing(
         )
 
 
-def person_beams(detection: SegmentDetection, *, margin: int = 1, clearance: float | None = 0.2) -> BoolArray:
+def person_beams(
+    detection: SegmentDetection,
+    *,
+    margin: int = 1,
+    clearance: float | None = 0.2,
+    persons: BoolArray | None = None,
+) -> BoolArray:
     """``(B,)`` bool: the beams of the person segments of ``detection``, plus up to ``margin``
     beams on each side of every person segment that belong to a single-point segment
     (a mixed pixel at the leg's edge) or have no return.
 
     ``clearance`` (metres, None: off): only person segments that are :func:`free_standing`
-    by that much are masked, so a wall's end taken for a leg keeps its beams.
+    by that much are masked, so a wall's end taken for a leg keeps its beams. ``persons``
+    (``(S,)`` bool, default ``detection.is_person``): the segments to mask, e.g. only the
+    legs of people tracked walking (:func:`tracked_legs`).
 
     Raises:
         ValueError: ``margin`` is negative, ``clearance`` is negative.
@@ -120,7 +161,7 @@ def person_beams(detection: SegmentDetection, *, margin: int = 1, clearance: flo
     if clearance is not None and not clearance >= 0:
         raise ValueError(f"clearance must be None or a distance >= 0 metres, got {clearance}")
     seg = detection.segmentation
-    flags = np.asarray(detection.is_person, dtype=bool)
+    flags = np.asarray(detection.is_person if persons is None else persons, dtype=bool)
     if flags.shape != (seg.n_segments,):
         return seg.beam_mask(flags)  # raises: one flag per segment
     out = np.zeros(seg.n_beams, dtype=bool)

@@ -112,6 +112,8 @@ class TrackState:
         position: ``(2,)`` metres; velocity: ``(2,)`` m/s; covariance: ``(4, 4)`` of (x, y, vx, vy).
         hits: scans with an associated detection; misses: scans missed in a row (0 = seen now).
         age: scans since birth; first_seen, last_seen: times in seconds.
+        travelled: metres, the farthest the track's estimated position has been from where it
+            was born (a person walks; a table leg taken for a leg stays put).
     """
 
     id: int
@@ -123,6 +125,7 @@ class TrackState:
     age: int
     first_seen: float
     last_seen: float
+    travelled: float = 0.0
 
     @property
     def speed(self) -> float:
@@ -152,6 +155,9 @@ class _Track:
     misses: int = 0
     age: int = 1
     id: int = 0  # 0 while tentative
+    x0: float = 0.0  # where it was born
+    y0: float = 0.0
+    travelled: float = 0.0  # the farthest the corrected position has been from (x0, y0)
 
     def predict(self, dt: float, q00: float, q01: float, q11: float) -> None:
         """:func:`kalman_predict` over ``dt`` seconds with process noise ``[[q00, q01], [q01, q11]]`` per axis."""
@@ -267,6 +273,7 @@ class PeopleTracker:
                 age=t.age,
                 first_seen=t.born,
                 last_seen=t.last_seen,
+                travelled=t.travelled,
             )
             for k, t in enumerate(sel)
         ]
@@ -318,6 +325,7 @@ class PeopleTracker:
                 tr = group[row]
                 k = cand[col]
                 tr.correct(zs[k][0], zs[k][1], r)
+                tr.travelled = max(tr.travelled, math.hypot(tr.px - tr.x0, tr.py - tr.y0))
                 tr.hits += 1
                 tr.misses = 0
                 tr.last_seen = t
@@ -343,7 +351,8 @@ class PeopleTracker:
             for k in range(K):
                 if not free[k]:
                     continue
-                tr = _Track(zs[k][0], zs[k][1], 0.0, 0.0, p0, 0.0, v0, p0, 0.0, v0, born=t, last_seen=t)
+                x, y = zs[k]
+                tr = _Track(x, y, 0.0, 0.0, p0, 0.0, v0, p0, 0.0, v0, born=t, last_seen=t, x0=x, y0=y)
                 if cfg.confirm_hits <= 1:
                     tr.id = self._next_id
                     self._next_id += 1

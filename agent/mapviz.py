@@ -4,7 +4,8 @@
 
 1. the occupancy grid (free white, walls black, unknown grey), enlarged ``scale`` times;
 2. the **areas** (``loci.areas/1``): each area's nodes as a tinted blob (the convex hull of
-   its nodes, grown by half a node distance) in the colour of its class;
+   its nodes, grown by half a node distance) in the colour of its class; over them the
+   robot's path (optional), a dot per scan in the colour of that scan's place label;
 3. the navigation graph's **edges** (``loci.graph/1``), thin dark lines;
 4. the **nodes**: place nodes as discs coloured by their label (room, corridor, doorway,
    hallway: :data:`knowledge.labels.CLASS_COLORS_BGR`, as in every label picture of the
@@ -115,6 +116,8 @@ def render_layered_map(
     objects: Sequence[Mapping[str, Any]] = (),
     out_png: str | Path | None = None,
     *,
+    trajectory: Sequence[tuple[float, float, str | None]] = (),
+    truth: Sequence[str | None] | None = None,
     title: str | None = None,
     odom_to_map: tuple[float, float, float] = (0.0, 0.0, 0.0),
     scale: int | None = None,
@@ -129,6 +132,10 @@ def render_layered_map(
             strings, as after JSON), or None.
         objects: ``{"name", "kind", "x", "y"}`` (map frame, metres) or ``{"name", "kind",
             "node"}`` mappings; objects at an unknown node are left out.
+        trajectory: the robot's path as ``(x, y, label)`` in the odometry frame, drawn as
+            small dots in the colour of each scan's place label, under the graph.
+        truth: the true class at each point of ``trajectory`` (an evaluation): each dot gets
+            a ring in that colour, so a wrong label shows as a dot in a ring of another colour.
         out_png: where to write the PNG (atomically), or None.
         title: a line above the map.
         odom_to_map: the odometry frame's pose in the map frame (metres, radians).
@@ -174,6 +181,16 @@ def render_layered_map(
     cv2.addWeighted(tint, 0.28, img, 0.72, 0, dst=img)
     for hull, colour, width in outlines:
         cv2.polylines(img, [hull], True, _darker(colour), width, cv2.LINE_AA)
+
+    # 2b. the path, coloured by each scan's label
+    dot = max(1, round(0.05 / cell_m))
+    if truth is not None:
+        if len(truth) != len(trajectory):
+            raise ValueError(f"truth has {len(truth)} labels for {len(trajectory)} trajectory points")
+        for (x, y, _), true in zip(trajectory, truth, strict=True):
+            cv2.circle(img, lm.px(x, y, frame="odom"), 2 * dot + 1, class_colour(true), -1)
+    for x, y, label in trajectory:
+        cv2.circle(img, lm.px(x, y, frame="odom"), dot, _darker(class_colour(label)), -1)
 
     # 3. edges
     for a_id, b_id in edges:

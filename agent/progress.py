@@ -12,12 +12,13 @@ from tqdm import tqdm
 class Progress:
     """A ``progress(stage, done, total)`` callable that shows one tqdm bar per stage on stderr.
 
-    Disabled (silent) when ``enabled`` is false, e.g. with ``--quiet``. Use as a context
+    Disabled (silent) when ``enabled`` is false, e.g. with ``--quiet``, and when standard
+    error is not a terminal (a log file or a journal gets no bar redraws). Use as a context
     manager so the last bar is closed.
     """
 
     def __init__(self, enabled: bool = True) -> None:
-        self.enabled = enabled
+        self.enabled = enabled and sys.stderr.isatty()
         self._bar: tqdm[Any] | None = None
         self._stage: str | None = None
 

@@ -8,20 +8,24 @@ those (scan, pose) pairs directly.
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
 from agent.bus.bridge import RawSample
 from agent.bus.codecs import LASER_SCAN_CODEC, POSE_CODEC
+from agent.bus.schemas import SCHEMAS
 from agent.commands.replay import read_recording_metadata, replay_recording
+from agent.odom_sync import SyncParams
 from agent.pipeline import Pipeline, PipelineParams, areas_message, graph_message
 from agent.recording.recorder import McapSink, recording_metadata
 from agent.recording.replay import McapMessages
@@ -117,10 +121,19 @@ def test_loci_replay_rebuilds_the_map_and_writes_it(tmp_path: Path, run: Run, mo
     want = expected(model, run)
     assert len(want.graph) >= 4
     doc = want.state_document()
-    out = loci("replay", str(rec), "--out-dir", str(tmp_path / "out"))
+    out = loci("replay", str(rec), "--out-dir", str(tmp_path / "out"), "--places", str(tmp_path / "p.jsonl"))
     assert out.returncode == 0, out.stderr
-    assert f"{len(run.scans)} scans, {len(run.poses)} odometry samples (1 invalid)" in out.stdout, out.stdout
-    assert f"{len(run.scans)} scans processed, 0 dropped" in out.stdout, out.stdout
+    n = len(run.scans)
+    assert f"{n} scans = {n} processed + 0 dropped;" in out.stdout, out.stdout
+    assert f"{len(run.poses) + 1} odometry messages (1 invalid ignored)" in out.stdout, out.stdout
+    # every place message, one per line, with its stamp and the laser's pose
+    lines = (tmp_path / "p.jsonl").read_text().splitlines()
+    assert lines == (tmp_path / "out" / "places.jsonl").read_text().splitlines()
+    places = [SCHEMAS.decode(line.encode(), "loci.place/1") for line in lines]
+    assert [p["stamp"] for p in places] == [s.stamp for s in run.scans]
+    assert [p["pose"]["x"] for p in places] == pytest.approx([p.x for p in run.scan_poses], abs=1e-4)
+    picture = cv2.imread(str(tmp_path / "out" / "map.png"))
+    assert picture is not None and picture.shape[0] > 100 and picture.shape[1] > 100
     graph = json.loads((tmp_path / "out" / "graph.json").read_text())
     areas = json.loads((tmp_path / "out" / "areas.json").read_text())
     assert graph == graph_message(doc, run.scans[-1].stamp)
@@ -145,9 +158,19 @@ def test_a_truncated_recording_replays_up_to_its_last_complete_message(
     assert "ends without its footer" in out.stderr
     got = json.loads(out.stdout)
     assert got["truncated"]
-    # the scans whose odometry made it into the file are processed; the others wait in vain
+    # the scans whose odometry made it into the file, or that are at most max_extrapolation past
+    # it, are processed; the others wait in vain
     last_odom = max(POSE_CODEC.decode(m.data).stamp for m in kept.__class__(cut) if m.topic.endswith("/odom"))
-    n = sum(LASER_SCAN_CODEC.decode(m.data).stamp <= last_odom for m in scans)
+    n = sum(LASER_SCAN_CODEC.decode(m.data).stamp <= last_odom + 0.1 for m in scans)
+    assert got["stats"]["accounting"] == {
+        "scans": len(scans),
+        "processed": n,
+        "failed": 0,
+        "dropped": {"unfinished": len(scans) - n} if len(scans) > n else {},
+        "invalid": 0,
+        "skipped": 0,
+        "balanced": True,
+    }
     assert got["stats"]["processed"] == n
     want = expected(model, run, n=n)
     assert got["graph"]["nodes"] == graph_message(want.state_document(), 0.0)["nodes"]
@@ -244,3 +267,33 @@ def test_map_edits_that_do_not_fit_or_do_not_decode_change_nothing(
     out = replay_recording(tmp_path / "edits.mcap", model=model)
     assert out.edits == 0 and out.edits_failed == 1
     assert sorted(out.pipeline.graph.nodes) == sorted(want.graph.nodes)
+
+
+def test_jittered_scan_stamps_cost_no_scan_in_a_replay(tmp_path: Path, run: Run, model: PlaceModel) -> None:
+    """A third of the scans are stamped up to 0.9 s early (a jittery laser clock) and arrive in
+    the order they were taken; the replay of such a foreign recording holds scans 1 s, so
+    every scan is processed, in stamp order, each with the pose at its own stamp."""
+    rng = np.random.default_rng(5)
+    early = np.where(rng.random(len(run.scans)) < 1 / 3, rng.uniform(0.0, 0.9, len(run.scans)), 0.0)
+    early[:5] = 0.0  # not before the first odometry sample
+    jittered = [replace(s, stamp=s.stamp - e) for s, e in zip(run.scans, early, strict=True)]
+    assert sum(b.stamp < a.stamp for a, b in itertools.pairwise(jittered)) > 5
+    rec = tmp_path / "jitter.mcap"
+    with McapSink(rec) as sink:
+        events = [(int((p.stamp + 0.003) * 1e9), "odom", POSE_CODEC.encode(p)) for p in run.poses]
+        events += [  # arrival: when the scan was taken, not its stamp
+            (int((s.stamp + 0.008) * 1e9), "scan", LASER_SCAN_CODEC.encode(j))
+            for s, j in zip(run.scans, jittered, strict=True)
+        ]
+        for t, stream, data in sorted(events):
+            codec = POSE_CODEC if stream == "odom" else LASER_SCAN_CODEC
+            sink.write(RawSample(f"loci/{ROBOT}/{stream}", data, codec.zenoh_encoding, t))
+    stamps: list[float] = []
+    res = replay_recording(rec, model=model, on_step=lambda r: stamps.append(r.stamp))
+    assert res.processed == len(run.scans) and res.accounting()["balanced"]
+    assert stamps == sorted(j.stamp for j in jittered)
+    # held 0 s (as a robot runs by default), a late scan costs itself and nothing else
+    res0 = replay_recording(rec, model=model, sync=SyncParams(reorder=0.0))
+    acc = res0.accounting()
+    assert acc["balanced"] and set(acc["dropped"]) == {"late"}
+    assert acc["processed"] + acc["dropped"]["late"] == len(run.scans)

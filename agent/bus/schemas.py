@@ -393,6 +393,14 @@ PLACE = MessageSchema(
                 description="share of the 360° scan's beams measured or hit in the local map "
                 "(the rest interpolated); below the graph's min_coverage the label does not vote",
             ),
+            "pose": obj(
+                {
+                    "x": number(description="metres"),
+                    "y": number(description="metres"),
+                    "theta": number(description="heading, radians, counter-clockwise"),
+                },
+                description="the laser's pose in the odometry frame at the scan's stamp",
+            ),
         },
     ),
     description="the place the robot is in now: the classifier's class and probabilities",

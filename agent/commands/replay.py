@@ -29,11 +29,24 @@ import sys
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from agent.odom_sync import SyncParams
+    from agent.pipeline import StepResult
 
 log = logging.getLogger(__name__)
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+#: How long a replay of a recording that does not say how it was associated (an imported
+#: log, a recording of foreign publishers) holds each scan so that late ones find their
+#: place in stamp order (:class:`~agent.odom_sync.SyncParams` ``reorder``). Offline, holding
+#: costs nothing.
+FOREIGN_REORDER = 1.0
 
 
 def register(subparsers: Any) -> None:
@@ -41,18 +54,36 @@ def register(subparsers: Any) -> None:
         "replay",
         help="run the agent's pipeline on a recording and print/write the graph and areas",
         description=(
-            "Replay an MCAP recording of a robot (loci run --record, or loci record) through the "
-            "agent's pipeline: scans and odometry as recorded, the same odometry association, "
-            "place classification, navigation graph and areas. Runs as fast as possible unless "
-            "--realtime. A truncated file (crashed writer) is replayed up to its last complete "
-            "message."
+            "Replay an MCAP recording of a robot (loci run --record, loci record, or loci import) "
+            "through the agent's pipeline: scans and odometry as recorded, the same odometry "
+            "association, place classification, navigation graph and areas. Runs as fast as "
+            "possible unless --realtime. A truncated file (crashed writer) is replayed up to its "
+            "last complete message. The summary accounts for every scan in the file: processed, "
+            "or not processed under a named reason."
         ),
-        epilog="Example: loci replay run1.mcap --out-dir out/run1   (writes navgraph.json, graph.json, areas.json)",
+        epilog=(
+            "Examples:\n"
+            "  loci replay run1.mcap --out-dir out/run1     "
+            "# navgraph.json, graph.json, areas.json, places.jsonl, map.png\n"
+            "  loci replay run1.mcap --places places.jsonl  # every loci.place/1 message, one per line"
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("input", type=Path, metavar="IN.mcap", help="the recording")
     p.add_argument("--realtime", action="store_true", help="pace the messages at recorded speed")
     p.add_argument(
-        "--out-dir", type=Path, metavar="DIR", help="write navgraph.json, graph.json and areas.json here"
+        "--out-dir",
+        type=Path,
+        metavar="DIR",
+        help="write navgraph.json, graph.json, areas.json, places.jsonl and map.png (the path "
+        "coloured by place label over a map built from the scans, with the graph and areas) here",
+    )
+    p.add_argument(
+        "--places",
+        type=Path,
+        metavar="FILE.jsonl",
+        help="write every loci.place/1 message the replay publishes, one JSON object per line "
+        "(stamp, label, probabilities, node, coverage, pose)",
     )
     p.add_argument("--json", action="store_true", help="print the graph, the areas and the counters as JSON")
     p.add_argument("--robot", help="the robot whose keys to replay (default: the recording's)")
@@ -63,7 +94,15 @@ def register(subparsers: Any) -> None:
         "--config",
         type=Path,
         metavar="FILE",
-        help="take the pipeline parameters from this robot configuration instead of the recording",
+        help="take the pipeline and [odometry] parameters from this robot configuration instead of "
+        "the recording",
+    )
+    p.add_argument(
+        "--reorder",
+        type=float,
+        metavar="SECONDS",
+        help="hold each scan this long so that late ones are put in stamp order (default: as "
+        f"recorded by loci run; {FOREIGN_REORDER:g} s for other recordings)",
     )
     p.add_argument(
         "--fresh", action="store_true", help="start from an empty map even if the live run resumed one"
@@ -75,13 +114,19 @@ def register(subparsers: Any) -> None:
 class ReplayOutcome:
     """What :func:`replay_recording` did.
 
+    Every scan message of the robot in the file is accounted for exactly once:
+    ``scans == processed + failed + sum(dropped.values()) + invalid_scans + skipped``
+    (:meth:`accounting`).
+
     Attributes:
         pipeline: the pipeline after the last message (its graph, areas, documents).
-        messages: scan and odometry messages read; invalid: those that did not decode.
+        messages: scan and odometry messages read; scans, odometry: of each kind.
+        invalid_scans, invalid_odometry: those that did not decode.
         skipped: scans after the live run's last one (see the module docstring).
+        errors: scans whose processing raised (logged; the scan is skipped, as live).
         truncated: the file ended without its footer (the writer crashed).
         live: the live run's final counters, if the recording has them.
-        sync: the odometry association's counters.
+        sync: the odometry association's counters; sync_params: its parameters.
         edits, edits_failed: recorded map edits made again, and those that did not fit.
     """
 
@@ -89,7 +134,8 @@ class ReplayOutcome:
     messages: int = 0
     scans: int = 0
     odometry: int = 0
-    invalid: int = 0
+    invalid_scans: int = 0
+    invalid_odometry: int = 0
     skipped: int = 0
     errors: int = 0
     edits: int = 0
@@ -98,6 +144,35 @@ class ReplayOutcome:
     resumed: bool = False
     live: dict[str, Any] | None = None
     sync: dict[str, int] = field(default_factory=dict)
+    sync_params: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def invalid(self) -> int:
+        return self.invalid_scans + self.invalid_odometry
+
+    @property
+    def processed(self) -> int:
+        return int(self.pipeline.scans)
+
+    def dropped(self) -> dict[str, int]:
+        """The association's drop reasons with a count (reason → scans)."""
+        from agent.odom_sync import DROP_REASONS
+
+        return {r: int(self.sync.get(r, 0)) for r in DROP_REASONS if self.sync.get(r, 0)}
+
+    def accounting(self) -> dict[str, Any]:
+        """Where every scan went; ``balanced`` says that the parts add up to ``scans``."""
+        dropped = self.dropped()
+        parts = self.processed + self.errors + sum(dropped.values()) + self.invalid_scans + self.skipped
+        return {
+            "scans": self.scans,
+            "processed": self.processed,
+            "failed": self.errors,
+            "dropped": dropped,
+            "invalid": self.invalid_scans,
+            "skipped": self.skipped,
+            "balanced": parts == self.scans,
+        }
 
     def stats(self) -> dict[str, Any]:
         return {
@@ -105,14 +180,18 @@ class ReplayOutcome:
             "scans": self.scans,
             "odometry": self.odometry,
             "invalid": self.invalid,
+            "invalid_scans": self.invalid_scans,
+            "invalid_odometry": self.invalid_odometry,
             "skipped": self.skipped,
             "errors": self.errors,
             "edits": self.edits,
             "edits_failed": self.edits_failed,
-            "processed": self.pipeline.scans,
+            "processed": self.processed,
+            "accounting": self.accounting(),
             "truncated": self.truncated,
             "resumed": self.resumed,
             "sync": self.sync,
+            "sync_params": self.sync_params,
             "live": self.live,
         }
 
@@ -171,14 +250,28 @@ def _survey(path: Path) -> tuple[set[str], dict[str, dict[str, Any]], dict[str, 
     return topics, finals, edits
 
 
+def recorded_sync_params(meta: dict[str, str]) -> SyncParams | None:
+    """The odometry association a recording was made with (None: it does not say)."""
+    from agent.odom_sync import SyncParams
+
+    if meta.get("sync"):
+        return SyncParams.from_table(json.loads(meta["sync"]))
+    if meta.get("max_wait") or meta.get("max_gap"):  # written before the full parameters were
+        return SyncParams(max_wait=float(meta.get("max_wait", 0.2)), max_gap=float(meta.get("max_gap", 0.5)))
+    return None
+
+
 def replay_recording(
     path: str | Path,
     *,
     robot: str | None = None,
     model: Any = None,
     params: Any = None,
+    sync: SyncParams | None = None,
     speed: float | None = None,
     fresh: bool = False,
+    on_step: Callable[[StepResult], None] | None = None,
+    progress: Callable[[str, int, int], None] | None = None,
 ) -> ReplayOutcome:
     """Replay a recording through the pipeline (see the module docstring).
 
@@ -188,15 +281,19 @@ def replay_recording(
         model: a loaded :class:`~knowledge.places.model.PlaceModel` (default: the recording's
             model file if it is there and has the recorded hash, else the bundled model).
         params: :class:`~agent.pipeline.PipelineParams` (default: the recording's).
+        sync: :class:`~agent.odom_sync.SyncParams` (default: the recording's, else
+            :data:`FOREIGN_REORDER` seconds of reordering and the other defaults).
         speed: None = as fast as possible, 1.0 = recorded speed.
         fresh: ignore the initial map the live run resumed from.
+        on_step: called with each processed scan's :class:`~agent.pipeline.StepResult`.
+        progress: ``progress(stage, done, total)`` over the scans (when the file says how many).
 
     Raises:
         DataError: the file is missing or not MCAP, or has no scans of the robot.
     """
     from agent.bus.codecs import LASER_SCAN_CODEC, POSE_CODEC
     from agent.bus.keys import RobotKeys
-    from agent.odom_sync import OdomSync
+    from agent.odom_sync import OdomSync, SyncParams
     from agent.pipeline import Pipeline, PipelineParams
     from agent.recording.replay import Replay
     from agent.runtime import checked_decode, file_sha256
@@ -225,6 +322,8 @@ def replay_recording(
             if meta.get("pipeline")
             else PipelineParams()
         )
+    if sync is None:
+        sync = recorded_sync_params(meta) or SyncParams(reorder=FOREIGN_REORDER)
     if model is None:
         recorded = Path(meta["model"]) if meta.get("model") else None
         if recorded is not None and recorded.is_file() and file_sha256(recorded) == meta.get("model_sha256"):
@@ -244,11 +343,12 @@ def replay_recording(
         pipeline = Pipeline.from_state(json.loads(initial), model, params)
     else:
         pipeline = Pipeline(model, params)
-    sync = OdomSync(max_wait=float(meta.get("max_wait", 0.2)), max_gap=float(meta.get("max_gap", 0.5)))
+    associate = OdomSync(sync)
     live = finals.get(keys.diagnostics)
     last = live.get("last_scan_stamp") if live else None
-    out = ReplayOutcome(pipeline=pipeline, resumed=outcome_resumed, live=live)
+    out = ReplayOutcome(pipeline=pipeline, resumed=outcome_resumed, live=live, sync_params=sync.to_table())
     replay = Replay(p, speed=speed, topics={keys.scan, keys.odom})
+    total = _message_count(p, keys.scan)
 
     edits = deque(sorted(all_edits.get(keys.stream("map/edit"), []), key=_edit_order))
 
@@ -269,39 +369,64 @@ def replay_recording(
         for m in matched:
             apply_edits(pipeline.last_stamp)
             try:
-                pipeline.process(m.scan, m.pose)
+                result = pipeline.process(m.scan, m.pose)
             except Exception:  # as the live agent does: the scan is skipped
                 out.errors += 1
-                log.exception(
-                    "processing scan %d (stamp %.3f) failed; it is skipped", m.scan.seq, m.scan.stamp
-                )
+                if out.errors <= 5:
+                    log.exception(
+                        "processing scan %d (stamp %.3f) failed; it is skipped", m.scan.seq, m.scan.stamp
+                    )
+                continue
+            if on_step is not None:
+                on_step(result)
 
     for msg in replay:
         out.messages += 1
         now = msg.log_time_ns * 1e-9
-        try:
-            if msg.topic == keys.odom:
+        if msg.topic == keys.odom:
+            out.odometry += 1
+            try:
                 pose = checked_decode(POSE_CODEC, msg.zenoh_encoding, msg.data, msg.topic)
-                out.odometry += 1
-                feed(sync.add_odom(pose, now))
+            except ProtocolError:
+                out.invalid_odometry += 1
                 continue
+            feed(associate.add_odom(pose, now))
+            continue
+        out.scans += 1
+        if progress is not None and total and (out.scans % 50 == 0 or out.scans == total):
+            progress("replay", out.scans, total)
+        try:
             scan = checked_decode(LASER_SCAN_CODEC, msg.zenoh_encoding, msg.data, msg.topic)
         except ProtocolError:
-            out.invalid += 1
+            out.invalid_scans += 1
             continue
         if isinstance(last, int | float) and scan.stamp > last:
             out.skipped += 1
             continue
-        out.scans += 1
-        feed(sync.add_scan(scan, now))
-    sync.close()
+        feed(associate.add_scan(scan, now))
+    feed(associate.close())
     apply_edits(pipeline.last_stamp)
     if edits:
         log.warning("%s: %d map edits came after the last replayed scan; not applied", p, len(edits))
         out.edits_failed += len(edits)
     out.truncated = replay.truncated
-    out.sync = sync.stats.as_dict()
+    out.sync = associate.stats.as_dict()
     return out
+
+
+def _message_count(path: Path, topic: str) -> int | None:
+    """How many messages the file's summary says ``topic`` has (None: no summary)."""
+    from mcap.reader import make_reader
+
+    try:
+        with path.open("rb") as f:
+            summary = make_reader(f).get_summary()
+            if summary is None or summary.statistics is None:
+                return None
+            ids = [c.id for c in summary.channels.values() if c.topic == topic]
+            return sum(summary.statistics.channel_message_counts.get(i, 0) for i in ids)
+    except Exception:  # a truncated file has no summary; the progress bar then has no total
+        return None
 
 
 def _edit_order(edit: dict[str, Any]) -> tuple[float, float]:
@@ -322,47 +447,90 @@ def _apply_edit(pipeline: Any, edit: dict[str, Any]) -> bool:
 
 
 def _replay(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
     from agent.config import load_config
-    from agent.pipeline import PipelineParams, areas_message, graph_message
+    from agent.odom_sync import SyncParams
+    from agent.pipeline import PipelineParams, areas_message, graph_message, place_message
+    from agent.progress import Progress
     from knowledge.fileio import atomic_write_text
+    from knowledge.metric.mapping import ScanMapper
     from knowledge.navigation import persistence
     from knowledge.places.model import PlaceModel
 
-    params = PipelineParams.from_config(load_config(args.config, env={})) if args.config else None
+    config = load_config(args.config, env={}) if args.config else None
+    params = PipelineParams.from_config(config) if config is not None else None
+    sync = config.odometry.sync if config is not None else None
+    if args.reorder is not None:
+        base = sync or recorded_sync_params(read_recording_metadata(args.input)) or SyncParams()
+        sync = replace(base, reorder=args.reorder)
     model = PlaceModel.load(args.model) if args.model else None
-    res = replay_recording(
-        args.input,
-        robot=args.robot,
-        model=model,
-        params=params,
-        speed=1.0 if args.realtime else None,
-        fresh=args.fresh,
-    )
+    want_places = args.places is not None or args.out_dir is not None
+    places: list[str] = []
+    mapper = ScanMapper() if args.out_dir is not None else None
+    path: list[tuple[float, float, str | None]] = []
+
+    def on_step(result: StepResult) -> None:
+        if want_places:
+            places.append(json.dumps(place_message(result), separators=(",", ":")))
+        if mapper is not None:
+            scan, pose = result.scan, result.pose
+            mapper.add(
+                scan.ranges,
+                scan.angles,
+                (pose.x, pose.y, pose.theta),
+                range_max=scan.range_max,
+                range_min=scan.range_min,
+            )
+            path.append((pose.x, pose.y, result.label))
+
+    with Progress(enabled=not args.quiet) as progress:
+        res = replay_recording(
+            args.input,
+            robot=args.robot,
+            model=model,
+            params=params,
+            sync=sync,
+            speed=1.0 if args.realtime else None,
+            fresh=args.fresh,
+            on_step=on_step,
+            progress=progress,
+        )
     pipeline = res.pipeline
     doc = pipeline.state_document()
     stamp = pipeline.last_stamp or 0.0
     graph, areas = graph_message(doc, stamp), areas_message(doc, stamp)
+    lines = "".join(line + "\n" for line in places)
+    written: list[str] = []
+    if args.places is not None:
+        atomic_write_text(args.places, lines)
+        written.append(str(args.places))
     if args.out_dir is not None:
-        atomic_write_text(args.out_dir / "navgraph.json", persistence.dumps(doc) + "\n")
-        atomic_write_text(args.out_dir / "graph.json", json.dumps(graph, indent=1) + "\n")
-        atomic_write_text(args.out_dir / "areas.json", json.dumps(areas, indent=1) + "\n")
+        from agent.mapviz import render_layered_map
+
+        out = args.out_dir
+        atomic_write_text(out / "navgraph.json", persistence.dumps(doc) + "\n")
+        atomic_write_text(out / "graph.json", json.dumps(graph, indent=1) + "\n")
+        atomic_write_text(out / "areas.json", json.dumps(areas, indent=1) + "\n")
+        atomic_write_text(out / "places.jsonl", lines)
+        assert mapper is not None
+        render_layered_map(
+            mapper.grid(args.input.stem),
+            graph,
+            areas,
+            out_png=out / "map.png",
+            trajectory=path,
+            title=f"{args.input.name}: {len(path)} scans, {len(graph['nodes'])} nodes, "
+            f"{len(areas['areas'])} areas (path coloured by place label)",
+        )
+        written.append(f"{out}/navgraph.json, graph.json, areas.json, places.jsonl, map.png")
     if res.truncated:
         print(
             f"{args.input}: the recording ends without its footer (its writer stopped early); "
             f"replayed up to its last complete message",
             file=sys.stderr,
         )
-    s = res.sync
-    summary = (
-        f"replayed {args.input}: {res.scans} scans, {res.odometry} odometry samples "
-        f"({res.invalid} invalid); {pipeline.scans} scans processed, {s['dropped']} dropped "
-        f"({s['no_odometry']} without odometry, {s['before_odometry']} before it, {s['odom_gap']} in gaps); "
-        f"{len(pipeline.graph)} nodes, {len(pipeline.areas.areas)} areas"
-        + (" (continuing the map the live run resumed)" if res.resumed else "")
-        + (f"; {res.skipped} scans after the live run's last one skipped" if res.skipped else "")
-        + (f"; {res.edits} map edits made again" if res.edits else "")
-        + (f" ({res.edits_failed} did not fit)" if res.edits_failed else "")
-    )
+    summary = summary_line(args.input, res)
     if args.json:
         print(json.dumps({"graph": graph, "areas": areas, "stats": res.stats(), "truncated": res.truncated}))
         print(summary, file=sys.stderr)
@@ -370,6 +538,44 @@ def _replay(args: argparse.Namespace) -> int:
         print(summary)
         for a in areas["areas"]:
             print(f"  area {a['id']}: {a['label'] or '?'} ({len(a['nodes'])} nodes)")
-        if args.out_dir is not None:
-            print(f"wrote {args.out_dir}/navgraph.json, graph.json, areas.json")
+        for w in written:
+            print(f"wrote {w}")
     return 0
+
+
+def summary_line(path: Path, res: ReplayOutcome) -> str:
+    """One line that accounts for every scan of the recording (see :meth:`ReplayOutcome.accounting`)."""
+    acc = res.accounting()
+    pipeline = res.pipeline
+    parts = [f"{acc['processed']} processed"]
+    dropped = acc["dropped"]
+    n_dropped = sum(dropped.values())
+    parts.append(
+        f"{n_dropped} dropped"
+        + (f" ({', '.join(f'{k} {v}' for k, v in dropped.items())})" if dropped else "")
+    )
+    for key, word in (("invalid", "invalid"), ("failed", "failed"), ("skipped", "after the live run's end")):
+        if acc[key]:
+            parts.append(f"{acc[key]} {word}")
+    s = res.sync
+    odom_notes = [
+        f"{n} {word}"
+        for n, word in (
+            (res.invalid_odometry, "invalid"),
+            (s.get("odom_out_of_order", 0), "out of order"),
+            (s.get("odom_future", 0), "stamped in the future"),
+        )
+        if n
+    ]
+    line = (
+        f"replayed {path}: {acc['scans']} scans = {' + '.join(parts)}; "
+        f"{res.odometry} odometry messages"
+        + (f" ({', '.join(odom_notes)} ignored)" if odom_notes else "")
+        + f"; {len(pipeline.graph)} nodes, {len(pipeline.areas.areas)} areas"
+        + (" (continuing the map the live run resumed)" if res.resumed else "")
+        + (f"; {res.edits} map edits made again" if res.edits else "")
+        + (f" ({res.edits_failed} did not fit)" if res.edits_failed else "")
+    )
+    if not acc["balanced"]:  # a bug, not bad data: say so rather than print a sum that does not add up
+        log.error("the replay's scan accounting does not add up: %s", acc)
+    return line

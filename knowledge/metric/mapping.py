@@ -1,0 +1,184 @@
+"""An occupancy grid from laser scans taken at known poses ("mapping with known poses").
+
+:class:`ScanMapper` counts, per cell, how often a beam ended there (a *hit*) and how often
+a beam crossed it (a *miss*), as GMapping's counting model does; a cell's occupancy is
+``hits / (hits + misses)``. Beams that hit nothing (``range >= range_max``) and invalid ones
+(below ``range_min``, NaN) count nothing — an open window or a dark surface says nothing
+certain about the cells along it. Beams longer than ``max_range`` are not used (far returns
+are sparse and their angle error grows with range). The grid grows as the scans reach new
+ground.
+
+:meth:`ScanMapper.grid` gives the :class:`~knowledge.metric.grid.OccupancyGrid`: occupied
+where the occupancy is at least ``occupied``, free where a beam crossed the cell and the
+occupancy is lower, unknown where no beam reached; in the frame of the poses. For pictures,
+and for a map built from a log with SLAM-corrected poses (the localization issue's ground
+truth map).
+
+Poses are the laser's ``(x, y, theta)`` in metres and radians; beam ``i`` points at
+``angles[i]`` radians from the laser's heading.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from knowledge.metric.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
+
+__all__ = ["MappingParams", "ScanMapper"]
+
+
+@dataclass(frozen=True)
+class MappingParams:
+    """How :class:`ScanMapper` builds its grid.
+
+    Attributes:
+        resolution: cell side, metres.
+        max_range: metres; longer beams are not used.
+        occupied: the occupancy (hits over hits and misses) from which a cell is occupied.
+        margin: metres of unknown border kept around what was seen (and the step the grid
+            grows by).
+    """
+
+    resolution: float = 0.05
+    max_range: float = 20.0
+    occupied: float = 0.25
+    margin: float = 2.0
+
+    def __post_init__(self) -> None:
+        for name in ("resolution", "max_range", "margin"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"MappingParams.{name} must be a positive number, got {v!r}")
+        if not (0.0 < self.occupied <= 1.0):
+            raise ValueError(f"MappingParams.occupied must be in (0, 1], got {self.occupied!r}")
+
+
+@numba.njit(cache=True, nogil=True)
+def _integrate(
+    hits: np.ndarray,
+    misses: np.ndarray,
+    x0: float,
+    y0: float,
+    ex: np.ndarray,
+    ey: np.ndarray,
+    res: float,
+    ox: float,
+    oy: float,
+) -> None:
+    """Trace each beam from ``(x0, y0)`` to ``(ex[i], ey[i])`` (world metres) through the grid
+    whose cell (0, 0) has its lower-left corner at ``(ox, oy)``; row = y index (bottom up).
+    The cells before the end cell get a miss, the end cell a hit."""
+    rows, cols = hits.shape
+    c0 = math.floor((x0 - ox) / res)
+    r0 = math.floor((y0 - oy) / res)
+    for i in range(ex.shape[0]):
+        c1 = math.floor((ex[i] - ox) / res)
+        r1 = math.floor((ey[i] - oy) / res)
+        dc = abs(c1 - c0)
+        dr = abs(r1 - r0)
+        sc = 1 if c1 > c0 else -1
+        sr = 1 if r1 > r0 else -1
+        err = dc - dr
+        c, r = c0, r0
+        while c != c1 or r != r1:  # Bresenham's walk
+            if 0 <= r < rows and 0 <= c < cols:
+                misses[r, c] += 1
+            e2 = 2 * err
+            if e2 > -dr:
+                err -= dr
+                c += sc
+            if e2 < dc:
+                err += dc
+                r += sr
+        if 0 <= r1 < rows and 0 <= c1 < cols:
+            hits[r1, c1] += 1
+
+
+class ScanMapper:
+    """Integrates scans at known poses into a growing grid of counts (see the module docstring)."""
+
+    def __init__(self, params: MappingParams | None = None) -> None:
+        self.params = params or MappingParams()
+        self._hits = np.zeros((0, 0), dtype=np.int32)
+        self._misses = np.zeros((0, 0), dtype=np.int32)
+        self._origin = (0.0, 0.0)  # world (x, y) of cell (row 0, col 0)'s lower-left corner
+        self.scans = 0
+
+    def _cover(self, xmin: float, ymin: float, xmax: float, ymax: float) -> None:
+        """Grow the grid (by at least a margin) so that it covers the box."""
+        prm = self.params
+        res = prm.resolution
+        rows, cols = self._hits.shape
+        ox, oy = self._origin
+        if rows and ox <= xmin and oy <= ymin and xmax < ox + cols * res and ymax < oy + rows * res:
+            return
+        if not rows:
+            new_ox, new_oy = xmin - prm.margin, ymin - prm.margin
+            shift_c = shift_r = 0
+            x1, y1 = xmax + prm.margin, ymax + prm.margin
+        else:
+            # the new origin lies a whole number of cells from the old one: the lattice stays
+            shift_c = max(0, math.ceil((ox - (xmin - prm.margin)) / res)) if xmin < ox else 0
+            shift_r = max(0, math.ceil((oy - (ymin - prm.margin)) / res)) if ymin < oy else 0
+            new_ox, new_oy = ox - shift_c * res, oy - shift_r * res
+            x1 = max(ox + cols * res, xmax + prm.margin if xmax >= ox + cols * res else 0.0)
+            y1 = max(oy + rows * res, ymax + prm.margin if ymax >= oy + rows * res else 0.0)
+        new_cols = math.ceil((x1 - new_ox) / res)
+        new_rows = math.ceil((y1 - new_oy) / res)
+        hits = np.zeros((new_rows, new_cols), dtype=np.int32)
+        misses = np.zeros((new_rows, new_cols), dtype=np.int32)
+        if rows:
+            hits[shift_r : shift_r + rows, shift_c : shift_c + cols] = self._hits
+            misses[shift_r : shift_r + rows, shift_c : shift_c + cols] = self._misses
+        self._hits, self._misses = hits, misses
+        self._origin = (new_ox, new_oy)
+
+    def add(
+        self,
+        ranges: np.ndarray,
+        angles: np.ndarray,
+        pose: tuple[float, float, float] | np.ndarray,
+        *,
+        range_max: float,
+        range_min: float = 0.0,
+    ) -> None:
+        """Integrate one scan: ``(n,)`` ranges (metres) at ``(n,)`` angles (radians) seen from
+        the laser's ``pose`` (x, y, theta)."""
+        r = np.asarray(ranges, dtype=np.float64)
+        a = np.asarray(angles, dtype=np.float64)
+        if r.ndim != 1 or a.shape != r.shape:
+            raise ValueError(f"ranges and angles must be 1-D of the same length, got {r.shape} and {a.shape}")
+        x, y, th = (float(v) for v in pose)
+        if not all(math.isfinite(v) for v in (x, y, th)):
+            raise ValueError(f"pose must be finite (x, y, theta), got {pose!r}")
+        prm = self.params
+        with np.errstate(invalid="ignore"):
+            use = np.isfinite(r) & (r > 0.0) & (r >= range_min) & (r < range_max * (1.0 - 1e-6))
+            use &= r <= prm.max_range
+        r, a = r[use], a[use]
+        self.scans += 1
+        if r.size == 0:
+            return
+        ex = x + r * np.cos(th + a)
+        ey = y + r * np.sin(th + a)
+        self._cover(
+            min(x, float(ex.min())), min(y, float(ey.min())), max(x, float(ex.max())), max(y, float(ey.max()))
+        )
+        ox, oy = self._origin
+        _integrate(self._hits, self._misses, x, y, ex, ey, self.params.resolution, ox, oy)
+
+    def grid(self, name: str = "scans") -> OccupancyGrid:
+        """The map so far (image orientation, origin at its lower-left corner)."""
+        hits, misses = self._hits, self._misses
+        if hits.size == 0:
+            hits = misses = np.zeros((1, 1), dtype=np.int32)
+        seen = hits + misses
+        state = np.full(hits.shape, UNKNOWN, dtype=np.int8)
+        state[seen > 0] = FREE
+        state[(hits > 0) & (hits >= self.params.occupied * seen)] = OCCUPIED
+        ox, oy = self._origin
+        return OccupancyGrid(state[::-1].copy(), self.params.resolution, (ox, oy, 0.0), name)

@@ -410,7 +410,7 @@ class Pipeline:
         in_opening = self.detector.passing
         coverage = float(known.mean())
         upd = self.graph.update(
-            sensor, label, doorway, in_opening=in_opening, ranges=ranges, coverage=coverage
+            sensor, label, doorway, in_opening=in_opening, ranges=ranges, coverage=coverage, known=known
         )
         events = tuple(self.areas.update(self.graph))
         self.scans += 1

@@ -174,23 +174,23 @@ def test_doorway_nodes_are_not_reached_from_beside_them() -> None:
     assert len(g.place_nodes()) >= 2
 
 
-def _door_round_trip(g: NavigationGraph, ranges: np.ndarray | None) -> None:
+def _door_round_trip(g: NavigationGraph, ranges: np.ndarray | None, known: np.ndarray | None = None) -> None:
     """Along a corridor (y = -1.2), up through a door at (3, 0.8) into a room, back out and
     diagonally away down the corridor, never coming within reach of the node below the door."""
 
     def go(points: list[tuple[float, float, float]], label: str, **kw: object) -> None:
         for x, y, th in points:
-            g.update((x, y, th), label, ranges=ranges, **kw)  # type: ignore[arg-type]
+            g.update((x, y, th), label, ranges=ranges, known=known, **kw)  # type: ignore[arg-type]
 
     up, down = math.pi / 2, -math.pi / 2
     go([(x, -1.2, 0.0) for x in np.arange(0.0, 3.0, 0.05)], "corridor")
     go([(3.0, y, up) for y in np.arange(-1.2, 0.0, 0.05)], "corridor")
     go([(3.0, y, up) for y in np.arange(0.0, 1.4, 0.05)], "doorway", in_opening=True)
-    g.update((3.0, 1.4, up), "room", Doorway((3.0, 0.8), 0.9, up, 0.0), ranges=ranges)
+    g.update((3.0, 1.4, up), "room", Doorway((3.0, 0.8), 0.9, up, 0.0), ranges=ranges, known=known)
     go([(3.0, y, up) for y in np.arange(1.4, 4.0, 0.05)], "room")
     go([(3.0, y, down) for y in np.arange(4.0, 1.4, -0.05)], "room")
     go([(3.0, y, down) for y in np.arange(1.4, 0.0, -0.05)], "doorway", in_opening=True)
-    g.update((3.0, 0.0, down), "corridor", Doorway((3.0, 0.8), 0.9, down, 0.0), ranges=ranges)
+    g.update((3.0, 0.0, down), "corridor", Doorway((3.0, 0.8), 0.9, down, 0.0), ranges=ranges, known=known)
     go([(3.0 + t * 1.5, -t * 1.2, -0.67) for t in np.arange(0.0, 1.0, 0.02)], "corridor")
     go([(x, -1.2, 0.0) for x in np.arange(4.5, 8.0, 0.05)], "corridor")
 
@@ -218,6 +218,11 @@ def test_visible_links_join_a_path_that_comes_back_beside_itself() -> None:
     walled = NavigationGraph()
     _door_round_trip(walled, np.full(360, 0.3))
     assert sorted(walled.edges()) == sorted(along_path.edges())
+    # long beams that were interpolated, not measured (a front laser's rear half with an
+    # empty local map), see nothing: they would see through walls
+    guessed = NavigationGraph()
+    _door_round_trip(guessed, np.full(360, 10.0), known=np.zeros(360, dtype=bool))
+    assert sorted(guessed.edges()) == sorted(along_path.edges())
 
 
 def test_nearest_and_shortest_path() -> None:

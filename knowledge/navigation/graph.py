@@ -9,7 +9,8 @@ Rules (positions in the odometry frame, metres):
 * **Edges follow the path**: from the node the robot was last at (created or reached) to
   the node it creates or reaches next; the edge length is the distance between the nodes.
   Given the full scan (``ranges``), a place node created or reached is also joined to the
-  place nodes within ``link_radius`` the robot can see, unless the line crosses a doorway.
+  place nodes within ``link_radius`` the robot can see along measured beams (a front
+  laser's interpolated rear beams see through walls), unless the line crosses a doorway.
 * **Labels by majority vote**: the graph keeps the last ``window`` (N) place labels of the
   classifier. When a place node is created or reached, the labels in that window are added
   to the node's vote counts, and its label is the class with most votes. A revisit with
@@ -383,7 +384,9 @@ class NavigationGraph:
             self._at = None
         self.revision += 1
 
-    def _link_visible(self, nid: int, pose: np.ndarray, scan: np.ndarray) -> list[tuple[int, int]]:
+    def _link_visible(
+        self, nid: int, pose: np.ndarray, scan: np.ndarray, known: np.ndarray | None
+    ) -> list[tuple[int, int]]:
         """Join ``nid`` to the nearby place nodes the robot sees at ``pose`` (see :meth:`update`)."""
         node = self.nodes[nid]
         radius = self.params.link_radius_m
@@ -399,9 +402,10 @@ class NavigationGraph:
             dx, dy = other.x - pose[0], other.y - pose[1]
             dist = math.hypot(dx, dy)
             i = round((math.atan2(dy, dx) - pose[2]) / step)
-            beams = scan[[(i - 1) % n, i % n, (i + 1) % n]]
-            # the robot must see past the node (by about its own size) along the beams towards it
-            if beams.min() < dist + 0.2:
+            toward = [(i - 1) % n, i % n, (i + 1) % n]
+            # the robot must see past the node (by about its own size) along the beams towards
+            # it, and those beams must be measured, not interpolated across a gap in the local map
+            if scan[toward].min() < dist + 0.2 or (known is not None and not known[toward].all()):
                 continue
             if self._crosses_doorway(node.xy, other.xy):
                 continue
@@ -430,6 +434,7 @@ class NavigationGraph:
         in_opening: bool = False,
         ranges: np.ndarray | None = None,
         coverage: float | None = None,
+        known: np.ndarray | None = None,
     ) -> GraphUpdate:
         """Advance the graph by one scan.
 
@@ -448,6 +453,8 @@ class NavigationGraph:
             coverage: the share of the scan's 360° beams that are known (measured, or hit in
                 the local map; :func:`knowledge.metric.rear_beams.assemble_scan`); below
                 ``min_coverage`` the label does not vote (None: it votes).
+            known: ``(n,)`` bool, the beams of ``ranges`` that are measured or hit in the local
+                map (the others are interpolated); only known beams join nodes (None: all).
         """
         p = np.asarray(pose, dtype=np.float64)
         if p.shape != (3,) or not np.isfinite(p).all():
@@ -457,6 +464,10 @@ class NavigationGraph:
             scan = np.asarray(ranges, dtype=np.float64)
             if scan.ndim != 1 or scan.size < 3:
                 raise ValueError(f"ranges must be a 1-D 360° scan, got shape {scan.shape}")
+            if known is not None:
+                known = np.asarray(known, dtype=bool)
+                if known.shape != scan.shape:
+                    raise ValueError(f"known must match ranges {scan.shape}, got shape {known.shape}")
         prm = self.params
         if coverage is not None and not (math.isfinite(coverage) and 0.0 <= coverage <= 1.0):
             raise ValueError(f"coverage must be a share of the beams in [0, 1], got {coverage!r}")
@@ -479,7 +490,7 @@ class NavigationGraph:
             if node.kind == PLACE and node.add_votes(self.window_counts()):
                 relabelled.append(nid)
             if node.kind == PLACE and scan is not None:
-                edges.extend(self._link_visible(nid, p, scan))
+                edges.extend(self._link_visible(nid, p, scan, known))
 
         if doorway is not None:
             near = self.nearest(doorway.center, kind=DOORWAY)

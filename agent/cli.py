@@ -25,6 +25,7 @@ COMMAND_MODULES: list[str] = [
     "agent.commands.record",
     "agent.commands.run",
     "agent.commands.replay",
+    "agent.commands.evaluate",
     "agent.commands.dialogue",
     "agent.commands.objects",
 ]

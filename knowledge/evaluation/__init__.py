@@ -1,0 +1,1 @@
+"""Scores of what the agent built against ground truth (real robot logs)."""

@@ -325,7 +325,9 @@ def _import_carmen(
     for _, text, _ in _carmen_lines(src, None, None):
         survey.add(text)
     try:
-        conv = CarmenConverter(survey, options, warn=warnings)
+        conv = CarmenConverter(
+            survey, options, warn=lambda reason, text: warnings(reason, f"{src.name} {text}")
+        )
     except ValueError as exc:
         raise DataError(f"{src}: {exc}") from exc
     stats = ImportStats()
@@ -479,7 +481,7 @@ def _import_bag(
             odom_frame=odom_frame,
             mount=mount,
             laser_frame=laser,
-            warn=warnings,
+            warn=lambda reason, text: warnings(reason, f"{src.name} {text}"),
         )
         stats = ImportStats()
         choices = {
@@ -505,15 +507,13 @@ def _import_bag(
                         try:
                             msg = decode(conn, raw)
                         except Exception as exc:
-                            outcome = Skip(
-                                "corrupt_message", f"{src.name} message {index} on {conn.topic}: {exc}"
-                            )
+                            outcome = Skip("corrupt_message", f"message {index} on {conn.topic}: {exc}")
                         else:
                             outcome = conv.convert(index, conn.topic, t_ns * 1e-9, msg)
                     stats.add(outcome)
                     if isinstance(outcome, Skip):
                         if outcome.detail:
-                            warnings(outcome.reason, outcome.detail)
+                            warnings(outcome.reason, f"{src.name} {outcome.detail}")
                     else:
                         for o in outcome:
                             writer.write(o)

@@ -358,3 +358,13 @@ def test_odd_ranges_never_reach_the_scan_as_nan(tmp_path: Path) -> None:
     _, got = run(tmp_path, [flaser(4, 1001.0, ["inf", "-inf", "nan", "1"]), flaser(4, 1001.1)])
     r = got[SCAN][0].ranges
     assert np.all(np.isfinite(r)) and r.tolist() == [0, 0, 0, 1]
+
+
+def test_every_warned_reason_is_bad_input(tmp_path: Path) -> None:
+    from agent.recording.imported import BAD_INPUT
+
+    lines = [flaser(5, 1001.0), "BANANA", flaser(5, 1001.2, ["nan", "1", "1", "1", "1"]), flaser(5, 1000.0)]
+    src = write_log(tmp_path / "w.log", lines)
+    res = import_log(src, tmp_path / "w.mcap", emit=lambda s: None)
+    assert set(res.warnings) == {"unknown_type", "bad_ranges", "time_backwards"}
+    assert set(res.warnings) <= BAD_INPUT

@@ -44,6 +44,8 @@ BAD_INPUT = frozenset(
         "corrupt_message",  # a bag message that does not deserialize
         "bad_message",  # a bag message with impossible values (zero angle increment, ...)
         "mount_changed",  # the laser's mount on the base moves in /tf (the first one is used)
+        "no_mount",  # /tf does not connect the base and the laser
+        "unknown_message_type",  # a needed bag topic whose type has no definition anywhere
     }
 )
 

@@ -23,6 +23,7 @@ COMMAND_MODULES: list[str] = [
     "agent.commands.sick",
     "agent.commands.sim",
     "agent.commands.record",
+    "agent.commands.import_",
     "agent.commands.run",
     "agent.commands.replay",
     "agent.commands.evaluate",

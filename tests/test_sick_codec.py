@@ -25,6 +25,7 @@ from drivers.sick.constants import (
     ERR_ABOVE_MAX,
     ERR_CHANNEL1,
     ERR_DAZZLE,
+    ERR_NO_ECHO,
     ERR_NOT_VALID,
     ERR_OPERATION_OVERFLOW,
     ERR_SNR_TOO_SMALL,
@@ -238,23 +239,37 @@ def test_error_codes_map_to_range_max_or_invalid() -> None:
     codes = np.array(
         [
             ERR_ABOVE_MAX,
-            ERR_NOT_VALID,
+            ERR_NO_ECHO,
             ERR_DAZZLE,
             ERR_OPERATION_OVERFLOW,
             ERR_SNR_TOO_SMALL,
             ERR_CHANNEL1,
             8184,
+            8185,
+            8188,
             1234,
         ]
     )
-    flags = np.array([0, 0, 0xE000, 0, 0, 0, 0, 0x2000], dtype=np.uint16)  # field bits must not matter
+    flags = np.array([0, 0, 0xE000, 0, 0, 0, 0, 0, 0, 0x2000], dtype=np.uint16)  # field bits must not matter
     ranges, intens = tg.values_to_ranges((codes | flags).astype(np.uint16), Units.MM)
     assert intens is None
     assert ranges[0] == pytest.approx(8.182)
     assert ranges[0] == pytest.approx(tg.range_max_m(Units.MM))
-    assert np.all(ranges[1:7] == 0.0)
-    assert ranges[7] == pytest.approx(1.234)
+    # "no echo" is a no-return like "> maximum", not an invalid beam
+    assert ranges[1] == ranges[0]
+    assert np.all(ranges[2:9] == 0.0)
+    assert ranges[9] == pytest.approx(1.234)
     assert tg.range_max_m(Units.CM) == pytest.approx(81.82)
+    assert ERR_NOT_VALID == ERR_NO_ECHO == 8191
+
+
+def test_no_echo_is_the_top_of_the_mask_in_every_mode() -> None:
+    for mode, mask in ((MeasuringMode.R16_FIELDS_AB, 0x3FFF), (MeasuringMode.R32_FIELD_A, 0x7FFF)):
+        above_max = mask - (0x1FFF - ERR_ABOVE_MAX)
+        v = np.array([mask, above_max, above_max + 1, mask - 1], dtype=np.uint16)
+        ranges, _ = tg.values_to_ranges(v, Units.CM, mode)
+        assert ranges[0] == ranges[1] == pytest.approx(tg.range_max_m(Units.CM, mode))
+        assert ranges[2] == ranges[3] == 0.0
 
 
 def test_reflector_mode_reports_intensities() -> None:
@@ -275,8 +290,11 @@ def test_ranges_survive_the_wire_within_half_a_unit(ranges: list[float], units: 
 
 
 def test_far_and_bad_ranges_encode_as_error_codes() -> None:
-    v = tg.ranges_to_values(np.array([np.inf, 100.0, np.nan, -1.0, 0.0]), Units.MM)
-    assert v.tolist() == [ERR_ABOVE_MAX, ERR_ABOVE_MAX, 0x1FFF, 0x1FFF, 0x1FFF]
+    v = tg.ranges_to_values(np.array([np.inf, 100.0, np.nan, -1.0, 0.0, -np.inf]), Units.MM)
+    assert v.tolist() == [ERR_ABOVE_MAX, ERR_ABOVE_MAX, ERR_DAZZLE, ERR_DAZZLE, ERR_DAZZLE, ERR_DAZZLE]
+    back, _ = tg.values_to_ranges(v, Units.MM)
+    assert back[:2].tolist() == pytest.approx([tg.range_max_m(Units.MM)] * 2)
+    assert np.all(back[2:] == 0.0)  # an invalid reading stays invalid on the way back
 
 
 # ---------------------------------------------------------------------------- the stream parser

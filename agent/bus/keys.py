@@ -159,6 +159,13 @@ STREAMS: dict[str, StreamSpec] = {
             Policy.DROP_OLDEST,
             "the simulated robot's true pose and place class (for evaluation only)",
         ),
+        StreamSpec(
+            "pose/truth",
+            "foxglove.PoseInFrame",
+            "log import → evaluation",
+            Policy.DROP_OLDEST,
+            "a log's reference pose of the robot (TRUEPOS, SLAM-corrected poses), frame map (for evaluation only)",
+        ),
     )
 }
 

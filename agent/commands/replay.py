@@ -276,7 +276,8 @@ def replay_recording(
     """Replay a recording through the pipeline (see the module docstring).
 
     Args:
-        path: the MCAP file.
+        path: the MCAP file (a ROS 2 bag in MCAP storage is imported with ``loci import``'s
+            defaults into a temporary file first).
         robot: whose keys (default: the recording's metadata, else the only robot with scans).
         model: a loaded :class:`~knowledge.places.model.PlaceModel` (default: the recording's
             model file if it is there and has the recorded hash, else the bundled model).
@@ -295,12 +296,13 @@ def replay_recording(
     from agent.bus.keys import RobotKeys
     from agent.odom_sync import OdomSync, SyncParams
     from agent.pipeline import Pipeline, PipelineParams
+    from agent.recording.importer import as_loci_recording
     from agent.recording.replay import Replay
     from agent.runtime import checked_decode, file_sha256
     from knowledge.errors import DataError, ProtocolError
     from knowledge.places.model import PlaceModel, default_model_path
 
-    p = Path(path)
+    p = as_loci_recording(Path(path))  # a ROS 2 bag (MCAP storage) is imported first
     meta = read_recording_metadata(p)
     topics, finals, all_edits = _survey(p)
     robot = robot or meta.get("robot")

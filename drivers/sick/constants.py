@@ -152,7 +152,12 @@ REFLECTOR_SHIFT: dict[int, int] = {
 
 # Error codes at the top of the 13-bit range (8 m / 80 m modes), telegram listing p. 124.
 # For the 14- and 15-bit modes the same offsets below the top are assumed (unverified).
-ERR_NOT_VALID = 8191
+# What each becomes in a LaserScan is the table in drivers.sick.telegrams (and docs/drivers.md).
+#: "Measured value not valid" in the listing; LMS units log it for a beam that got no echo
+#: back, so it is a no-return (36,004 of the 1,724,760 readings of the Freiburg 079 log).
+ERR_NO_ECHO = 8191
+#: The listing's name for 8191, kept for callers that use it.
+ERR_NOT_VALID = ERR_NO_ECHO
 ERR_DAZZLE = 8190
 ERR_OPERATION_OVERFLOW = 8189
 ERR_SNR_TOO_SMALL = 8187
@@ -160,6 +165,9 @@ ERR_CHANNEL1 = 8186
 ERR_ABOVE_MAX = 8183
 #: Distance between the top of the range mask and "measured value > maximum".
 ABOVE_MAX_OFFSET = 0x1FFF - ERR_ABOVE_MAX
+#: Distance between the top of the range mask and "dazzle", the code an invalid reading is
+#: encoded with (:func:`~drivers.sick.telegrams.ranges_to_values`).
+DAZZLE_OFFSET = 0x1FFF - ERR_DAZZLE
 
 #: Variant (command 0x3B): scan angle in degrees → allowed resolutions in 1/100 degree.
 VARIANTS: dict[int, tuple[int, ...]] = {180: (50, 100), 100: (25, 50, 100)}

@@ -19,10 +19,30 @@ Payload layouts follow sicktoolbox's ``SickLMS.cc`` (offsets into the reply payl
   then an optional real-time scan index byte (availability flag 0x02).
 
 Range error codes (8 m/80 m modes; top of the 13-bit range, telegram listing p. 124, as
-used by ROS's sicktoolbox_wrapper): 8183 "measured value > maximum" becomes
-``range_max`` (the beam saw nothing within range, as :class:`~drivers.messages.LaserScan`
-wants); 8186–8191 (no valid value, dazzle, overflow, signal/noise too small, channel error)
-and the unassigned 8184–8185 become ``0.0`` — below ``range_min``, i.e. invalid.
+used by ROS's sicktoolbox_wrapper) and what :func:`values_to_ranges` makes of them:
+
+=====  =============================  ==============================================
+code   listing                        in a :class:`~drivers.messages.LaserScan`
+=====  =============================  ==============================================
+8183   measured value > maximum       ``range_max`` (no return)
+8184   (unassigned)                   ``0.0`` (invalid: below ``range_min``)
+8185   (unassigned)                   ``0.0`` (invalid)
+8186   error reading channel 1        ``0.0`` (invalid)
+8187   signal/noise ratio too small   ``0.0`` (invalid)
+8188   (unassigned)                   ``0.0`` (invalid)
+8189   operation overflow             ``0.0`` (invalid)
+8190   dazzle                         ``0.0`` (invalid)
+8191   measured value not valid       ``range_max`` (no return: "no echo")
+=====  =============================  ==============================================
+
+``range_max`` is one unit below 8183 (81.82 m in cm units, 8.182 m in mm units), so a
+no-return carries the sensor's ``range_max`` as :class:`~drivers.messages.LaserScan` wants
+for beams that hit nothing. 8191 is a no-return, not an invalid beam: LMS units log it for a
+beam that got no echo back. Nothing came back, so nothing was measured along the beam; that
+is what a no-return says. (In the Freiburg 079 log, 36,004 of 1,724,760 readings are 81.91 m,
+most of them at ±50-90° from the front, where corridor walls are hit at grazing angles.)
+The CARMEN importer maps logged 81.83-81.91 m through this same function. Every other code
+is an invalid reading.
 """
 
 from __future__ import annotations
@@ -38,6 +58,7 @@ from drivers.sick.constants import (
     ABOVE_MAX_OFFSET,
     AVAILABILITY_REALTIME_INDEX,
     BAUD_MODES,
+    DAZZLE_OFFSET,
     INSTALLATION_PASSWORD,
     RANGE_MASK,
     REFLECTOR_SHIFT,
@@ -412,8 +433,9 @@ def values_to_ranges(
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Raw 0xB0 words → ``(ranges (n,) float32 metres, intensities (n,) float32 or None)``.
 
-    Error codes map as the module docstring says: "> maximum" → ``range_max_m``, the
-    others → 0.0 (invalid). Intensities are the reflector levels of the reflector modes.
+    Error codes map as the module docstring's table says: "> maximum" (8183) and "no echo"
+    (8191, the top of the mask) → ``range_max_m`` (no return), the codes between them → 0.0
+    (invalid). Intensities are the reflector levels of the reflector modes.
     """
     if units not in UNIT_METRES:
         raise ProtocolError(f"unknown measured-value units code {units} (0 is cm, 1 is mm)")
@@ -423,8 +445,8 @@ def values_to_ranges(
     above_max = mask - ABOVE_MAX_OFFSET
     unit = UNIT_METRES[units]
     ranges = raw.astype(np.float32) * np.float32(unit)
-    ranges[raw == above_max] = np.float32((above_max - 1) * unit)
     ranges[raw > above_max] = 0.0
+    ranges[(raw == above_max) | (raw == mask)] = np.float32((above_max - 1) * unit)
     intensities = None
     if measuring_mode in REFLECTOR_SHIFT:
         intensities = (v >> REFLECTOR_SHIFT[measuring_mode]).astype(np.float32)
@@ -436,20 +458,22 @@ def ranges_to_values(
 ) -> np.ndarray:
     """Metres → raw 0xB0 words (what a scanner would send).
 
-    Ranges at or beyond the largest valid value become the "value > maximum" code; NaN,
-    negative or zero ranges become "no valid value" (the top of the mask).
+    Ranges at or beyond the largest valid value (and +inf) become the "value > maximum" code;
+    NaN, -inf, negative or zero ranges become "dazzle" (an invalid reading; the top of the
+    mask is "no echo", a no-return).
     """
     if units not in UNIT_METRES:
         raise ValueError(f"unknown measured-value units code {units} (0 is cm, 1 is mm)")
     mask = range_mask(measuring_mode)
     above_max = mask - ABOVE_MAX_OFFSET
+    invalid = mask - DAZZLE_OFFSET
     r = np.asarray(ranges, dtype=np.float64)
     with np.errstate(invalid="ignore"):
         units_f = np.round(r / UNIT_METRES[units])
         out = np.where(units_f >= above_max, above_max, units_f)
-        out = np.where(~np.isfinite(r) & ~np.isposinf(r), mask, out)
+        out = np.where(~np.isfinite(r) & ~np.isposinf(r), invalid, out)
         out = np.where(np.isposinf(r), above_max, out)
-        out = np.where(r <= 0, mask, out)
+        out = np.where(r <= 0, invalid, out)
     return out.astype(np.uint16)
 
 

@@ -16,7 +16,7 @@ OUT ?= out
 help:
 	@echo "make demo   install (into .venv) and run the main job: loci demo"
 	@echo "make test   install and run lint, type checks and the tests"
-	@echo "make eval   leave-one-building-out evaluation on ../shared/data (long)"
+	@echo "make eval   leave-one-building-out and real-log evaluations on ../shared/data (long)"
 	@echo "make bench  benchmarks, as ratios against baselines run in the same process (long)"
 	@echo "make clean  remove .venv and outputs"
 
@@ -51,6 +51,7 @@ test: lint typecheck unit
 eval: $(STAMP)
 	$(BIN)/python -m agent.tools.evaluate_places --out docs/results
 	$(BIN)/python -m agent.tools.evaluate_topology --out docs/results
+	$(BIN)/python -m agent.tools.evaluate_real_logs --out docs/results
 
 bench: $(BENCH_STAMP)
 	$(BIN)/python -m agent.tools.bench --out docs/results

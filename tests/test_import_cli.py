@@ -66,7 +66,7 @@ def test_import_then_replay_as_a_user_types_it(tmp_path: Path) -> None:
     assert "\r" not in r.stderr and "import:" not in r.stderr  # no progress bar without a terminal
     r = loci("replay", out)
     assert r.returncode == 0, r.stderr
-    assert "replayed" in r.stdout and "60 scans processed, 0 dropped" in r.stdout, r.stdout
+    assert "replayed" in r.stdout and "60 scans = 60 processed + 0 dropped" in r.stdout, r.stdout
     # the same file again: refused without --force
     r = loci("import", log, out)
     assert r.returncode == 2 and "exists" in r.stderr and "--force" in r.stderr
@@ -111,7 +111,7 @@ def test_a_ros2_mcap_bag_replays_straight(tmp_path: Path) -> None:
     r = loci("replay", mcap)
     assert r.returncode == 0, r.stderr
     assert "is a ROS 2 bag: imported it first" in r.stderr
-    assert "10 scans, 21 odometry samples" in r.stdout and "10 scans processed" in r.stdout, r.stdout
+    assert "10 scans = 10 processed + 0 dropped; 21 odometry messages" in r.stdout, r.stdout
 
 
 def test_progress_bar_on_a_terminal(tmp_path: Path) -> None:

@@ -100,3 +100,44 @@ def test_people_bag(shared_data: Path, tmp_path: Path) -> None:
 
 def _options(**kw: str) -> CarmenOptions:
     return CarmenOptions(**kw)
+
+
+def test_loci_evaluate_log_on_a_stretch_of_freiburg_079(shared_data: Path, tmp_path: Path) -> None:
+    """The CLI as a user types it, on the first 4,000 lines of the real log (about 980 scans
+    along the corridor and into the first rooms) with the data set's per-scan labels and
+    labelled map: every processed scan is scored, and the agent does better than chance."""
+    import json
+    import subprocess
+    import sys
+
+    logs = shared_data / "logs"
+    head = prefix(logs / "freiburg-079-corrected.log.gz", tmp_path / "head.log.gz", 4000)
+    rec = tmp_path / "head.mcap"
+    import_log(head, rec, emit=lambda s: None)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "agent.cli",
+            "evaluate",
+            "log",
+            str(rec),
+            "--labels",
+            str(logs / "fr079_labels_provisional.npz"),
+            "--label-map",
+            str(logs / "Freiburg79_labels_provisional.png"),
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert out.returncode == 0, out.stderr
+    got = json.loads(out.stdout)
+    n = got["replay"]["processed"]
+    assert got["replay"]["balanced"] and 900 < n < 1100
+    assert got["scans"]["scored"] == n and got["scans"]["labelled"] == 4791
+    two = got["scans"]["room_corridor"]
+    assert two["n"] > 0.9 * n and two["balanced_accuracy"] > 0.55
+    assert got["doorways"]["doors_driven_through"] >= 1 and got["areas"]["rooms_visited"] >= 1

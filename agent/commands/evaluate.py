@@ -155,7 +155,9 @@ def format_report(name: str, s: LogScores) -> str:
 
     two, three, d, a = s.two_class, s.three_class, s.doors, s.areas
     lines = [
-        f"{name}: {s.scans_labelled} labelled scans, {s.scans_scored} processed and scored",
+        f"{name}: {s.scans_labelled} labelled scans"
+        + (f" ({s.scans_in_span} in the replayed stretch)" if s.scans_in_span != s.scans_labelled else "")
+        + f", {s.scans_scored} processed and scored",
         f"per scan, room/corridor: {pct(two.accuracy)} (balanced {pct(two.balanced_accuracy)}; "
         f"always {s.majority_class}: {pct(s.majority_two)})",
         f"per scan, 3 classes:     {pct(three.accuracy)} (balanced {pct(three.balanced_accuracy)})",

@@ -48,10 +48,26 @@ BENCHMARKS: list[tuple[str, str, list[str], str]] = [
         [],
         "the agent per scan: latency telegram → place (target p99 < 5 ms), sustained rate, memory over an hour",
     ),
+    (
+        "replay",
+        "agent.tools.bench_replay",
+        [],
+        "replaying the real Freiburg 079 log: scans/s against the log's own pace, per-scan time on real scans",
+    ),
 ]
 
 #: benchmarks whose --json takes a file (the others print JSON with --json)
-JSON_FILE = {"raycast", "features", "labeling", "boosting", "topology", "agent", "conceptual", "objects"}
+JSON_FILE = {
+    "raycast",
+    "features",
+    "labeling",
+    "boosting",
+    "topology",
+    "agent",
+    "conceptual",
+    "objects",
+    "replay",
+}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -19,6 +19,9 @@ of doorway-labelled scans along the path, and regions are unknown.
 
 What is scored (:func:`evaluate`):
 
+A replay of part of a log is scored against the labelled scans of its stretch (between its
+first and last processed stamp): the doors, rooms and nodes of that stretch.
+
 * **per scan**: room/corridor accuracy over the scans whose truth is room or corridor
   (hallway counts as corridor; a doorway prediction there is wrong) and 3-class accuracy
   (room, corridor, doorway), each with balanced accuracy and the confusion matrix, and the
@@ -281,6 +284,8 @@ class Truth:
         regions: ``(n,)`` region ids (0: unknown; all 0 without a label map).
         label_map: the labelled map, if there is one.
         doors: the labelled doors.
+        map_xy: ``(n, 2)`` where each scan lies in the labelled map's frame (metres), None
+            without a map.
     """
 
     stamps: np.ndarray
@@ -289,6 +294,7 @@ class Truth:
     regions: np.ndarray
     label_map: LabelMap | None
     doors: tuple[Door, ...]
+    map_xy: np.ndarray | None = None
 
     @classmethod
     def from_arrays(
@@ -299,11 +305,13 @@ class Truth:
         *,
         label_map: LabelMap | None = None,
         map_px: np.ndarray | None = None,
+        map_xy: np.ndarray | None = None,
         door_merge: float = 0.7,
         min_stay: float = 0.5,
     ) -> Truth:
-        """The truth from per-scan arrays (``labels``: codes or class names); ``door_merge``
-        and ``min_stay`` (metres) as in :func:`_map_doors` and :func:`_run_doors`."""
+        """The truth from per-scan arrays (``labels``: codes or class names). Where each scan
+        lies in the labelled map: ``map_px`` (pixels), ``map_xy`` (metres), else its pose.
+        ``door_merge`` and ``min_stay`` (metres) as in :func:`_map_doors` and :func:`_run_doors`."""
         t = np.asarray(stamps, dtype=np.float64)
         p = np.asarray(poses, dtype=np.float64)
         lab = np.asarray(labels)
@@ -316,10 +324,13 @@ class Truth:
         if n and not np.all(np.diff(t) > 0):
             raise ValueError("the labelled scans' stamps must increase strictly")
         regions = np.zeros(n, dtype=np.int64)
+        xy = None
         if label_map is not None:
             if map_px is not None:
                 px = np.asarray(map_px, dtype=np.int64).reshape(n, 2)
                 xy = label_map.alignment.to_m(px.astype(np.float64))
+            elif map_xy is not None:
+                xy = np.asarray(map_xy, dtype=np.float64).reshape(n, 2)
             else:
                 xy = p[:, :2]
             _, regions = label_map.place_at(xy)
@@ -327,7 +338,21 @@ class Truth:
             doors = _map_doors(label_map, xy, door_ids, regions, door_merge, min_stay)
         else:
             doors = _run_doors(p[:, :2], names, door_merge)
-        return cls(t, p, names, regions.astype(np.int64), label_map, tuple(doors))
+        return cls(t, p, names, regions.astype(np.int64), label_map, tuple(doors), xy)
+
+    def within(self, t0: float, t1: float) -> Truth:
+        """The truth of the scans stamped in ``[t0, t1]`` (a replay of part of the log: the
+        doors it drove through are those of that stretch)."""
+        sel = (self.stamps >= t0) & (self.stamps <= t1)
+        if sel.all():
+            return self
+        return Truth.from_arrays(
+            self.stamps[sel],
+            self.poses[sel],
+            self.labels[sel],
+            label_map=self.label_map,
+            map_xy=None if self.map_xy is None else self.map_xy[sel],
+        )
 
     @classmethod
     def from_npz(cls, arrays: Mapping[str, np.ndarray], label_map_image: np.ndarray | None = None) -> Truth:
@@ -497,6 +522,7 @@ class LogScores:
     """What :func:`evaluate` measured (see the module docstring); :meth:`as_dict` for JSON."""
 
     scans_labelled: int
+    scans_in_span: int
     scans_scored: int
     two_class: Scores
     three_class: Scores
@@ -511,6 +537,7 @@ class LogScores:
         return {
             "scans": {
                 "labelled": self.scans_labelled,
+                "in_span": self.scans_in_span,
                 "scored": self.scans_scored,
                 "room_corridor": self.two_class.as_dict(),
                 "three_class": self.three_class.as_dict(),
@@ -554,13 +581,16 @@ def evaluate(
     """
     s = np.asarray(stamps, dtype=np.float64)
     pred = np.asarray(list(predicted), dtype=object)
-    idx = match_stamps(truth.stamps, s, stamp_tolerance)
+    labelled = int(truth.stamps.size)
+    if s.size:
+        truth = truth.within(float(s.min()) - stamp_tolerance, float(s.max()) + stamp_tolerance)
+    idx = match_stamps(truth.stamps, s, stamp_tolerance) if truth.stamps.size else np.full(s.shape, -1)
     ok = idx >= 0
     if not ok.any():
         first = f"{s[0]:.3f}" if s.size else "none"
         raise ValueError(
-            f"no processed scan has a labelled stamp within {stamp_tolerance} s (first processed: {first}, "
-            f"first labelled: {truth.stamps[0]:.3f}); are the labels for this log, on the same clock?"
+            f"no processed scan has a labelled stamp within {stamp_tolerance} s (first processed: {first}); "
+            "are the labels for this log, on the same clock?"
         )
     t_lab = truth.labels[idx[ok]]
     p_lab = _as_two(pred[ok])
@@ -570,7 +600,8 @@ def evaluate(
     majority, n_major = counts.most_common(1)[0] if counts else ("corridor", 0)
     nodes_score, unlabelled = _score_nodes(truth, graph, node_radius)
     return LogScores(
-        scans_labelled=int(truth.stamps.size),
+        scans_labelled=labelled,
+        scans_in_span=int(truth.stamps.size),
         scans_scored=int(ok.sum()),
         two_class=two,
         three_class=three,

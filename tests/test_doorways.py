@@ -82,6 +82,29 @@ def run_front(b: Building, poses: np.ndarray) -> list[Doorway]:
     return found
 
 
+def test_a_door_stepped_over_between_two_sparse_scans_is_found(building: Building, doors: list[Door]) -> None:
+    """A log with a scan every second: the front laser sees the door from 1.5 m before it, and
+    the next scan comes 1.2 m beyond it. The detector measures at poses in between on the
+    local map's points; measuring only at the scans (max_step 10 m) finds nothing."""
+    door = doors[0]
+    poses = crossing(building, door)
+    sparse = poses[[0, 3, len(poses) - 5]]  # 1.5 m and 1.3 m before, then 1.2 m beyond
+    scans = cast(building.grid, sparse, n_beams=361, fov=math.pi, max_range=30.0)
+    found: dict[float, list[Doorway]] = {}
+    for max_step in (0.25, 10.0):
+        det, m = DoorwayDetector(DoorwayParams(max_step=max_step)), LocalMap()
+        found[max_step] = []
+        for k, (pose, r) in enumerate(zip(sparse, scans, strict=True)):
+            m.add(r, SICK, pose, stamp=float(k), range_max=30.0)
+            d = det.update(m.points_in_robot_frame(pose), pose, float(k))
+            if d is not None:
+                found[max_step].append(d)
+    assert found[10.0] == []
+    (d,) = found[0.25]
+    assert math.dist(d.center, door.center) < 0.2 and d.width == pytest.approx(door.width, abs=0.1)
+    assert 1.0 < d.stamp < 2.0  # measured between the second and the third scan
+
+
 def _angle_diff(a: float, b: float) -> float:
     return abs(math.atan2(math.sin(a - b), math.cos(a - b)))
 

@@ -173,7 +173,8 @@ def format_report(name: str, s: LogScores) -> str:
         lines.append(
             f"areas: {a['areas']}; {a['rooms_with_own_area']} of {a['rooms_visited']} rooms visited are "
             f"their own area ({pct(a['own_area_share'])}); over nodes: recall {pct(a['recall_mean'])}, "
-            f"precision {pct(a['precision_mean'])} (mean per place / per area)"
+            f"precision {pct(a['precision_mean'])} (mean per place / per area), pooled "
+            f"{pct(a['recall_pooled'])} / {pct(a['precision_pooled'])}"
         )
     else:
         lines.append(f"areas: {a['areas']} ({a.get('note', '')})")

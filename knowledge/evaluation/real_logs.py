@@ -34,7 +34,8 @@ first and last processed stamp): the doors, rooms and nodes of that stretch.
 * **areas against the places visited** (needs regions): for each region the robot's nodes
   stand in, the area holding most of them; a room is *its own area* when that area holds at
   least half of the room's nodes and nothing else beyond ``area_purity``; and the segmentation
-  scores of Bormann et al. over nodes (recall per region, precision per area, means).
+  scores of Bormann et al. over nodes (recall per region, precision per area; their means and
+  the node-pooled ratios).
 
 Everything is in metres in the log's frame; no file is read here except by the two
 ``from_*`` constructors' callers passing arrays (pure code).
@@ -701,12 +702,11 @@ def _score_areas(
                 "own_area": is_own,
             }
         )
-    recall = [
-        max((c for (rr, _), c in pairs.items() if rr == r), default=0) / region_size[r] for r in region_size
-    ]
-    precision = [
-        max((c for (_, aa), c in pairs.items() if aa == a), default=0) / area_size[a] for a in area_size
-    ]
+    best_of_region = {r: max((c for (rr, _), c in pairs.items() if rr == r), default=0) for r in region_size}
+    best_of_area = {a: max((c for (_, aa), c in pairs.items() if aa == a), default=0) for a in area_size}
+    recall = [best_of_region[r] / region_size[r] for r in region_size]
+    precision = [best_of_area[a] / area_size[a] for a in area_size]
+    total = sum(region_size.values())
     out.update(
         {
             "regions_visited": len(region_size),
@@ -715,6 +715,8 @@ def _score_areas(
             "own_area_share": round(own / len(rooms), 6) if rooms else None,
             "recall_mean": round(float(np.mean(recall)), 6) if recall else None,
             "precision_mean": round(float(np.mean(precision)), 6) if precision else None,
+            "recall_pooled": round(sum(best_of_region.values()) / total, 6) if total else None,
+            "precision_pooled": round(sum(best_of_area.values()) / total, 6) if total else None,
             "rooms": detail,
             "purity": purity,
         }

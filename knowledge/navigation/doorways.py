@@ -37,6 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from knowledge.metric.local_map import to_robot_frame
+
 __all__ = ["Doorway", "DoorwayDetector", "DoorwayParams", "Opening", "measure_opening", "scan_points"]
 
 
@@ -57,6 +59,8 @@ class DoorwayParams:
         max_depth: metres of travel inside the opening, beyond which it is a passage, not a door.
         same_opening: metres; a measurement whose centre lies farther than this from the
             narrowest one or from the first one belongs to another opening (the first is left).
+        max_step: metres of travel between two measurements; a longer step between two
+            scans is measured at poses in between (:meth:`DoorwayDetector.update`).
     """
 
     min_width: float = 0.5
@@ -68,6 +72,7 @@ class DoorwayParams:
     wall_depth: float = 0.45
     max_depth: float = 1.6
     same_opening: float = 0.5
+    max_step: float = 0.25
 
     def __post_init__(self) -> None:
         for name in (
@@ -79,6 +84,7 @@ class DoorwayParams:
             "wall_depth",
             "max_depth",
             "same_opening",
+            "max_step",
         ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
@@ -245,6 +251,8 @@ class DoorwayDetector:
         self.params = params or DoorwayParams()
         self._passage: _Passage | None = None
         self._last: np.ndarray | None = None
+        self._last_pose: np.ndarray | None = None
+        self._last_stamp = 0.0
 
     @property
     def passing(self) -> bool:
@@ -255,11 +263,17 @@ class DoorwayDetector:
         """Forget an opening being passed (e.g. after the odometry was reset)."""
         self._passage = None
         self._last = None
+        self._last_pose = None
 
     def update(
         self, points: np.ndarray, pose: np.ndarray | tuple[float, float, float], stamp: float = 0.0
     ) -> Doorway | None:
         """Feed one scan's points; returns the doorway just passed through, if any.
+
+        A robot that moved more than ``max_step`` since the previous scan (a sparse log: a
+        scan every second or every few seconds) could step over an opening between two scans;
+        the detector then also measures at poses in between (interpolated every
+        ``max_step``), on the same points seen from there: the local map holds the jambs.
 
         Args:
             points: ``(k, 2)`` obstacle points in the robot frame (x forward, y left), metres.
@@ -269,12 +283,32 @@ class DoorwayDetector:
         p = np.asarray(pose, dtype=np.float64)
         if p.shape != (3,) or not np.isfinite(p).all():
             raise ValueError(f"pose must be a finite (x, y, theta) triple, got {pose!r}")
+        pts = np.asarray(points, dtype=np.float64)
+        prev = self._last_pose
+        result = None
+        if prev is not None:
+            n = math.ceil(float(np.hypot(*(p[:2] - prev[:2]))) / self.params.max_step)
+            if n > 1:
+                c, s = math.cos(p[2]), math.sin(p[2])
+                world = p[:2] + pts @ np.array([[c, s], [-s, c]])
+                dth = math.atan2(math.sin(p[2] - prev[2]), math.cos(p[2] - prev[2]))
+                for k in range(1, n):
+                    f = k / n
+                    q = np.array([*(prev[:2] + f * (p[:2] - prev[:2])), prev[2] + f * dth])
+                    t = self._last_stamp + f * (stamp - self._last_stamp)
+                    result = self._step(to_robot_frame(world, q), q, t) or result
+        return self._step(pts, p, stamp) or result
+
+    def _step(self, points: np.ndarray, p: np.ndarray, stamp: float) -> Doorway | None:
+        """One measurement at the robot's pose ``p`` (see :meth:`update`)."""
         prm = self.params
         pas = self._passage
         step = 0.0 if self._last is None else float(np.hypot(*(p[:2] - self._last)))
         self._last = p[:2].copy()
+        self._last_pose = p.copy()
+        self._last_stamp = stamp
         limit = prm.max_width + (prm.hysteresis if pas is not None else 0.0)
-        m = _measure(np.asarray(points, dtype=np.float64), prm, limit)
+        m = _measure(points, prm, limit)
         here = None
         if m is not None:
             c, s = math.cos(p[2]), math.sin(p[2])

@@ -54,9 +54,11 @@ from collections.abc import Awaitable, Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, TypeVar
 
+from agent.bus.schemas import MAX_JSON_DEPTH, SMALL_MESSAGE_BYTES, json_depth
 from agent.dialogue.referring import answer_text, describe_target, kind_words
 from agent.dialogue.referring import with_article as _with_article
 from agent.dialogue_memory import AREA_CLASSES, MemoryConcepts, class_of_words
+from agent.ratelog import RateLimitedLog
 from knowledge.errors import LociError
 from knowledge.navigation.consistency import FalseDoorway, false_doorways, remove_doorway
 from knowledge.navigation.graph import PLACE, NavigationGraph
@@ -199,6 +201,7 @@ class DialogueAgent:
         self._seq = 0
         self.replies = 0
         self.invalid = 0
+        self._ratelog = RateLimitedLog(log)
 
     # ------------------------------------------------------------------ ids, messages
     def _next(self, prefix: str) -> str:
@@ -236,9 +239,11 @@ class DialogueAgent:
     def error_for_raw(self, payload: bytes, reason: str) -> Outgoing | None:
         """The error reply to a malformed intent that carries an id (None: it has none)."""
         self.invalid += 1
+        if len(payload) > SMALL_MESSAGE_BYTES or json_depth(payload) > MAX_JSON_DEPTH:
+            return None
         try:
             doc = json.loads(payload)
-        except (UnicodeDecodeError, ValueError):
+        except (ValueError, RecursionError):
             return None
         if not isinstance(doc, dict) or not isinstance(doc.get("id"), str) or len(doc["id"]) > 128:
             return None
@@ -406,7 +411,7 @@ class DialogueAgent:
             log.info("intent %s (%s) refused: %s", intent.get("id"), kind, exc)
             return [self.say(intent, kind, "error", reason=str(exc).strip("'\""))]
         except Exception as exc:
-            log.exception("intent %s (%s) failed", intent.get("id"), kind)
+            self._ratelog(f"intent {kind}", "intent %s (%s) failed", intent.get("id"), kind, exc=exc)
             return [self.say(intent, kind, "error", reason=f"something went wrong: {exc}")]
         return out
 

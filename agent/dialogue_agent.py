@@ -164,6 +164,10 @@ class DialogueAgent:
         follow_factory: makes a follow-me controller (``agent.follow.FollowMe``); None:
             import ``agent.follow`` when asked (an error reply if it is not there).
         people: whether the scans come with people (``[people] enabled``); follow-me needs them.
+        commit: awaited after each change of the concepts and before the reply that
+            acknowledges it: makes the map (graph and areas) the change refers to durable
+            (the runtime saves ``navgraph.json`` if it changed). The concepts store commits
+            its own change in ``submit``.
         on_map_changed: called after the dialogue changed the map, with the edit
             (``{"op": "remove_doorway", "node": 13, "reason": ...}``, a ``loci.map_edit/1`` body
             without its stamps).
@@ -180,6 +184,7 @@ class DialogueAgent:
         people: bool = True,
         on_map_changed: Callable[[dict[str, Any]], None] | None = None,
         clock: Callable[[], float] = time.time,
+        commit: Callable[[], Awaitable[None]] | None = None,
     ) -> None:
         self.world = world
         self.concepts: Concepts = concepts if concepts is not None else MemoryConcepts()
@@ -187,6 +192,7 @@ class DialogueAgent:
         self._follow_factory = follow_factory
         self.people_on = people
         self._on_map_changed = on_map_changed
+        self._commit = commit
         self.clock = clock
         self.pose: tuple[float, float, float] | None = None
         self.tasks: dict[str, _Task] = {}  # base goal id -> task
@@ -422,8 +428,11 @@ class DialogueAgent:
         return node, area
 
     async def _tell(self, fn: Callable[[Any], Any]) -> Any:
+        """Change the concepts; returns once the change and the map it refers to are durable."""
         result = await self.concepts.submit(fn)
         self.concepts.request_reasoning()
+        if self._commit is not None:
+            await self._commit()
         return result
 
     async def _on_ask_place(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:

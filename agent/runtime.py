@@ -385,6 +385,7 @@ class Agent:
             follow_factory=self._follow_factory(),
             people=cfg.people.enabled,
             on_map_changed=self._map_changed,
+            commit=self._commit_map,
         )
         # what the map already holds (a resumed map) goes to the concepts first
         self.dialogue.on_area_events(
@@ -790,6 +791,15 @@ class Agent:
                     continue
                 for out in await self.dialogue.on_detections(detections, frame.stamp):
                     self._send(out)
+
+    async def _commit_map(self) -> None:
+        """Save the map now if it changed since the last save (the dialogue awaits this before
+        it acknowledges a fact about an area: the area must survive a kill with the fact)."""
+        if self._dirty and self.pipeline is not None:
+            saves = self.report.saves
+            await self._save()
+            if self.report.saves == saves:
+                raise DataError(f"the map could not be saved to {self.config.state.path}; see the log")
 
     async def _save(self) -> None:
         pipeline = self.pipeline

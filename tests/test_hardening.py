@@ -231,6 +231,8 @@ def test_a_flood_of_bad_messages_logs_few_lines_and_no_traceback_per_message(
 
     async def body(agent: Agent, session: zenoh.Session, said: Said, say: Any, run: Any) -> None:
         caplog.clear()
+        assert agent.pipeline is not None
+        before = agent.pipeline.messages(0.0)
         block = zenoh.CongestionControl.BLOCK  # the default, DROP, may lose some of a flood
 
         def put(stream: str, payload: bytes) -> None:
@@ -245,6 +247,10 @@ def test_a_flood_of_bad_messages_logs_few_lines_and_no_traceback_per_message(
         await _until(lambda: all(st.invalid == n for st in streams))
         r = await said.reply(say("ask_place"))
         assert r["status"] == "ok"
+        # what held in the issue: the map is unchanged, and nothing bad got an "ok"
+        assert agent.pipeline.messages(0.0) == before
+        assert [m["status"] for m in said.messages if m.get("in_reply_to") == "x"] == ["error"] * (n // 2)
+        assert [m for m in said.messages if m["status"] == "ok"] == [r]
 
     with caplog.at_level(logging.INFO):
         agent = run_agent(tmp_path, body)

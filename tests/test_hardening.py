@@ -188,7 +188,7 @@ def test_a_deeply_nested_intent_is_refused_and_the_agent_keeps_answering(tmp_pat
 
 def test_oversized_camera_frames_are_refused_from_their_header(tmp_path: Path) -> None:
     # failure 2: a header claiming 65,000 x 65,000 pixels made the camera task raise and the
-    # agent exit; 20,000 x 20,000 held the event loop for 7.9 s and 2.3 GB
+    # agent exit; 20,000 x 20,000 held the event loop for 7.9 s (memory to 2.6 GB)
     watching: list[Watching] = []
 
     async def body(agent: Agent, session: zenoh.Session, said: Said, say: Any, run: Any) -> None:

@@ -52,7 +52,7 @@ def test_header_gives_the_size_without_decoding(ext: str, params: dict[str, int]
 @pytest.mark.parametrize("ext", [".jpg", ".png"])
 def test_a_header_larger_than_the_camera_is_refused_with_both_sizes(ext: str, size: tuple[int, int]) -> None:
     # failure 2: 65,000 x 65,000 made cv2.imdecode raise (the agent exited); 20,000 x 20,000
-    # took 7.9 s and 2.3 GB
+    # took 7.9 s (memory to 2.6 GB)
     data = claiming(encoded(ext, 64, 48), *size)
     with pytest.raises(ProtocolError, match=rf"header says {size[0]} x {size[1]} pixels"):
         decode_image(data, max_width=W, max_height=H)

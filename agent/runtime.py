@@ -438,7 +438,10 @@ class Agent:
             if self._on_ready is not None:
                 self._on_ready(self)
             stopper = asyncio.create_task(stop.wait(), name="stop")
-            done, _ = await asyncio.wait({stopper, *tasks.values()}, return_when=asyncio.FIRST_COMPLETED)
+            # a task that ends (its input closed) stops the agent; the recorder's end does not
+            # (it ends when its file failed: the agent runs on without recording)
+            watched = {t for name, t in tasks.items() if name != "recorder"}
+            done, _ = await asyncio.wait({stopper, *watched}, return_when=asyncio.FIRST_COMPLETED)
             stopper.cancel()
             for t in done:
                 if t is not stopper and not t.cancelled() and t.exception() is not None:

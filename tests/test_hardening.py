@@ -278,3 +278,33 @@ def test_the_intents_and_frames_of_this_file_are_what_the_issue_describes() -> N
     # ... and real JPEG headers that claim the sizes, and that OpenCV reads as such
     frame = CAMERA_CODEC.decode(CAMERA_CODEC.encode(a_frame(0, jpeg_claiming(65000, 65000))))
     assert frame.jpeg is not None and b"\xff\xc0" in frame.jpeg
+
+
+def test_a_task_that_fails_is_restarted_and_the_agent_keeps_answering(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    # a bug (here: one injected into the dialogue's handling of base statuses) once made the
+    # dialogue task fail and the agent exit with it
+    async def body(agent: Agent, session: zenoh.Session, said: Said, say: Any, run: Any) -> None:
+        assert agent.dialogue is not None
+        real = agent.dialogue.on_base_status
+        failures = []
+
+        def buggy(status: Any) -> Any:
+            if not failures:
+                failures.append(status)
+                raise RuntimeError("a bug in the dialogue")
+            return real(status)
+
+        agent.dialogue.on_base_status = buggy  # type: ignore[method-assign]
+        status = {"schema": "loci.base_status/1", "stamp": time.time(), "status": "idle"}
+        publish_stream(session, ROBOT, "base/status").put(status)
+        await _until(lambda: agent.restarts["dialogue"] == 1)
+        r = await said.reply(say("ask_place"))
+        assert r["status"] == "ok" and failures
+
+    with caplog.at_level(logging.ERROR, logger="agent"):
+        agent = run_agent(tmp_path, body)
+    assert agent.report.restarts == {"dialogue": 1}
+    (line,) = [r for r in caplog.records if "the dialogue task failed" in r.getMessage()]
+    assert line.exc_info is not None and "restarting it in 0.1 s" in line.getMessage()

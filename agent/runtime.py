@@ -171,7 +171,6 @@ def _percentiles(values: deque[float]) -> dict[str, float]:
 class AgentReport:
     """What a run did (returned by :meth:`Agent.run`, printed by ``loci run`` at exit).
 
-    ``restarts`` counts the failures of each task (each was logged and the task restarted).
     ``drops`` holds the scans (or samples) lost for lack of capacity or time: ``driver``
     (the LMS driver's queue), ``scan_queue``, ``odom_queue`` (bus subscriptions),
     ``no_odometry``, ``odom_gap``, ``overflow`` (:class:`~agent.odom_sync.OdomSync`); scans
@@ -183,7 +182,7 @@ class AgentReport:
     scans_fed: int = 0
     scans_processed: int = 0
     errors: int = 0
-    restarts: dict[str, int] = field(default_factory=dict)
+    restarts: dict[str, int] = field(default_factory=dict)  # failures by task (each logged, restarted)
     drops: dict[str, int] = field(default_factory=dict)
     sync: dict[str, int] = field(default_factory=dict)
     invalid: dict[str, int] = field(default_factory=dict)

@@ -11,13 +11,14 @@ STAMP := $(VENV)/.installed-dev
 BENCH_STAMP := $(VENV)/.installed-bench
 OUT ?= out
 
-.PHONY: help install demo test lint typecheck unit eval bench clean
+.PHONY: help install demo test lint typecheck unit eval bench fuzz clean
 
 help:
 	@echo "make demo   install (into .venv) and run the main job: loci demo"
 	@echo "make test   install and run lint, type checks and the tests"
 	@echo "make eval   leave-one-building-out and real-log evaluations on ../shared/data (long)"
 	@echo "make bench  benchmarks, as ratios against baselines run in the same process (long)"
+	@echo "make fuzz   reliability probes: a million SICK telegrams, 10,000 messages per bus key, 30 serial replugs (long)"
 	@echo "make clean  remove .venv and outputs"
 
 $(STAMP): pyproject.toml
@@ -58,3 +59,6 @@ bench: $(BENCH_STAMP)
 
 clean:
 	rm -rf $(VENV) $(OUT) build *.egg-info
+
+fuzz: $(STAMP)
+	$(BIN)/python -m agent.tools.fuzz

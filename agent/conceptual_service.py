@@ -8,7 +8,10 @@ per reasoning, so:
   off the event loop, and runs again once if changes came in while it ran — many changes, few
   reasonings;
 * :meth:`ConceptualService.snapshot` and :meth:`ConceptualService.resolve` answer at once from
-  the last snapshot (refreshed after each change and each reasoning); they never wait for Java.
+  the last snapshot (refreshed after each change and each reasoning); they never wait for Java;
+* a change is committed to the SQLite file before :meth:`ConceptualService.submit` returns
+  (durable before acknowledged: the robot says "ok" to a fact only once a kill cannot lose
+  it; reasoning, which may take a second, is not waited for).
 """
 
 from __future__ import annotations
@@ -119,7 +122,8 @@ class ConceptualService:
     # ---- work on the owner thread ------------------------------------------------------------------
 
     def submit(self, fn: Callable[[ConceptualMap], T]) -> Awaitable[T]:
-        """Run ``fn(map)`` on the owner thread; a change refreshes the snapshot and asks for reasoning."""
+        """Run ``fn(map)`` on the owner thread; a change is committed to the file, refreshes the
+        snapshot and asks for reasoning (the result comes once the change is committed)."""
         if self._executor is None or self._map is None or self._loop is None:
             raise RuntimeError("the conceptual service is not started")
         m = self._map
@@ -127,7 +131,10 @@ class ConceptualService:
         def call() -> tuple[T, dict[str, Any] | None]:
             before = m.version
             out = fn(m)
-            return out, (m.snapshot() if m.version != before else None)
+            if m.version == before:
+                return out, None
+            m.save()  # committed before anyone is told it is done
+            return out, m.snapshot()
 
         inner = self._loop.run_in_executor(self._executor, call)
         outer: asyncio.Future[T] = self._loop.create_future()

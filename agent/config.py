@@ -70,6 +70,7 @@ ENV_VARS: dict[str, tuple[str, str, Callable[[str], Any]]] = {
     "LOCI_BUS_MODE": ("bus", "mode", str),
     "LOCI_BUS_LISTEN": ("bus", "listen", _split_list),
     "LOCI_BUS_CONNECT": ("bus", "connect", _split_list),
+    "LOCI_BUS_CONFIG_FILE": ("bus", "config_file", str),
 }
 CONFIG_ENV = "LOCI_CONFIG"
 

@@ -54,9 +54,11 @@ from collections.abc import Awaitable, Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, TypeVar
 
+from agent.bus.schemas import MAX_JSON_DEPTH, SMALL_MESSAGE_BYTES, json_depth
 from agent.dialogue.referring import answer_text, describe_target, kind_words
 from agent.dialogue.referring import with_article as _with_article
 from agent.dialogue_memory import AREA_CLASSES, MemoryConcepts, class_of_words
+from agent.ratelog import RateLimitedLog
 from knowledge.errors import LociError
 from knowledge.navigation.consistency import FalseDoorway, false_doorways, remove_doorway
 from knowledge.navigation.graph import PLACE, NavigationGraph
@@ -162,6 +164,10 @@ class DialogueAgent:
         follow_factory: makes a follow-me controller (``agent.follow.FollowMe``); None:
             import ``agent.follow`` when asked (an error reply if it is not there).
         people: whether the scans come with people (``[people] enabled``); follow-me needs them.
+        commit: awaited after each change of the concepts and before the reply that
+            acknowledges it: makes the map (graph and areas) the change refers to durable
+            (the runtime saves ``navgraph.json`` if it changed). The concepts store commits
+            its own change in ``submit``.
         on_map_changed: called after the dialogue changed the map, with the edit
             (``{"op": "remove_doorway", "node": 13, "reason": ...}``, a ``loci.map_edit/1`` body
             without its stamps).
@@ -178,6 +184,7 @@ class DialogueAgent:
         people: bool = True,
         on_map_changed: Callable[[dict[str, Any]], None] | None = None,
         clock: Callable[[], float] = time.time,
+        commit: Callable[[], Awaitable[None]] | None = None,
     ) -> None:
         self.world = world
         self.concepts: Concepts = concepts if concepts is not None else MemoryConcepts()
@@ -185,6 +192,7 @@ class DialogueAgent:
         self._follow_factory = follow_factory
         self.people_on = people
         self._on_map_changed = on_map_changed
+        self._commit = commit
         self.clock = clock
         self.pose: tuple[float, float, float] | None = None
         self.tasks: dict[str, _Task] = {}  # base goal id -> task
@@ -199,6 +207,7 @@ class DialogueAgent:
         self._seq = 0
         self.replies = 0
         self.invalid = 0
+        self._ratelog = RateLimitedLog(log)
 
     # ------------------------------------------------------------------ ids, messages
     def _next(self, prefix: str) -> str:
@@ -236,9 +245,11 @@ class DialogueAgent:
     def error_for_raw(self, payload: bytes, reason: str) -> Outgoing | None:
         """The error reply to a malformed intent that carries an id (None: it has none)."""
         self.invalid += 1
+        if len(payload) > SMALL_MESSAGE_BYTES or json_depth(payload) > MAX_JSON_DEPTH:
+            return None
         try:
             doc = json.loads(payload)
-        except (UnicodeDecodeError, ValueError):
+        except (ValueError, RecursionError):
             return None
         if not isinstance(doc, dict) or not isinstance(doc.get("id"), str) or len(doc["id"]) > 128:
             return None
@@ -406,7 +417,7 @@ class DialogueAgent:
             log.info("intent %s (%s) refused: %s", intent.get("id"), kind, exc)
             return [self.say(intent, kind, "error", reason=str(exc).strip("'\""))]
         except Exception as exc:
-            log.exception("intent %s (%s) failed", intent.get("id"), kind)
+            self._ratelog(f"intent {kind}", "intent %s (%s) failed", intent.get("id"), kind, exc=exc)
             return [self.say(intent, kind, "error", reason=f"something went wrong: {exc}")]
         return out
 
@@ -417,8 +428,11 @@ class DialogueAgent:
         return node, area
 
     async def _tell(self, fn: Callable[[Any], Any]) -> Any:
+        """Change the concepts; returns once the change and the map it refers to are durable."""
         result = await self.concepts.submit(fn)
         self.concepts.request_reasoning()
+        if self._commit is not None:
+            await self._commit()
         return result
 
     async def _on_ask_place(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:

@@ -2,7 +2,9 @@
 messages out, and its :meth:`~agent.dialogue_agent.DialogueAgent.tick` every ``period`` seconds.
 
 Started by :mod:`agent.runtime`; everything it does with a message is the agent's (this
-module only moves payloads and keeps serving when one is bad).
+module only moves payloads and keeps serving when one is bad). An intent that makes the
+decoder or the agent fail unexpectedly is answered with an error (when it has an id),
+counted as invalid and logged once in full, then as counts; the next intent is served.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from typing import Any
 
 from agent.bus.bridge import BusClosed
 from agent.dialogue_agent import DialogueAgent, Outgoing
+from agent.ratelog import RateLimitedLog
 from knowledge.errors import ProtocolError
 
 __all__ = ["run_dialogue"]
@@ -48,12 +51,27 @@ async def run_dialogue(
 
         registry = SCHEMAS
 
+    ratelog = RateLimitedLog(log)
+
     def send(out: Iterable[Outgoing]) -> None:
         for o in out:
             try:
                 publish(o)
-            except (ProtocolError, ValueError) as exc:  # a bug: say so, keep serving
-                log.error("could not publish on %s: %s (%s)", o.stream, exc, o.message)
+            except Exception as exc:  # a bug: say so, keep serving
+                ratelog(
+                    f"publish {o.stream}",
+                    "could not publish on %s: %s (%.300s)",
+                    o.stream,
+                    exc,
+                    o.message,
+                    exc=exc,
+                )
+
+    def refuse(payload: bytes, reason: str) -> None:
+        if invalid is not None:
+            invalid()
+        reply = agent.error_for_raw(payload, reason)
+        send([reply] if reply is not None else [])
 
     async def serve_intents() -> None:
         while True:
@@ -61,11 +79,17 @@ async def run_dialogue(
                 try:
                     intent = registry.decode(payload, "loci.intent/1")
                 except ProtocolError as exc:
-                    log.warning("dialogue/intent: dropped an invalid intent: %s", exc)
-                    if invalid is not None:
-                        invalid()
-                    reply = agent.error_for_raw(payload, str(exc))
-                    send([reply] if reply is not None else [])
+                    ratelog(
+                        "invalid intent",
+                        "dialogue/intent: dropped an invalid intent: %s",
+                        exc,
+                        level=logging.WARNING,
+                    )
+                    refuse(payload, str(exc))
+                    continue
+                except Exception as exc:  # a decoder bug: the intent is lost, the dialogue is not
+                    ratelog("decode intent", "dialogue/intent: decoding an intent failed: %s", exc, exc=exc)
+                    refuse(payload, "the intent could not be read")
                     continue
                 send(await agent.handle(intent))
 

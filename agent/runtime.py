@@ -13,7 +13,13 @@
 5. open the laser: an LMS 2xx on ``laser.port`` (each scan it gives is published on
    ``loci/<robot>/scan`` and then processed, so the recording holds exactly the scans the
    agent saw) or a subscription to ``loci/<robot>/scan``;
-6. run until ``stop`` is set (SIGINT/SIGTERM in ``loci run``) or a task fails.
+6. run until ``stop`` is set (SIGINT/SIGTERM in ``loci run``).
+
+Every task runs under :func:`~agent.supervisor.supervise`: a task that raises is logged (its
+first failure of a kind with the traceback, then counts), counted (``restarts`` in the report
+and the diagnostics) and started again after a back-off (0.1 s doubling to 5 s); no task's
+failure stops the agent. The recorder is not restarted (its file is closed when it fails);
+the agent runs on without recording.
 
 Tasks (one event loop, one thread for the core): the **laser** task (driver or bus), the
 **odometry** task (bus), the **housekeeping** task (every 50 ms: expire scans that waited
@@ -89,7 +95,10 @@ from agent.dialogue_memory import MemoryConcepts
 from agent.dialogue_task import run_dialogue
 from agent.odom_sync import Matched, OdomSync
 from agent.pipeline import Pipeline, PipelineParams, StepResult, place_message
+from agent.ratelog import RateLimitedLog
 from agent.recording.recorder import McapSink, Recorder, recording_metadata
+from agent.supervisor import Restarts, supervise
+from drivers.camera.jpeg import decode_image
 from drivers.messages import LaserScan, Pose2D
 from knowledge.errors import ConfigError, DataError, ProtocolError
 from knowledge.fileio import atomic_write_text
@@ -172,6 +181,7 @@ class AgentReport:
     scans_fed: int = 0
     scans_processed: int = 0
     errors: int = 0
+    restarts: dict[str, int] = field(default_factory=dict)  # failures by task (each logged, restarted)
     drops: dict[str, int] = field(default_factory=dict)
     sync: dict[str, int] = field(default_factory=dict)
     invalid: dict[str, int] = field(default_factory=dict)
@@ -213,6 +223,8 @@ class Agent:
         self.params = PipelineParams.from_config(config)
         self.sync = OdomSync(config.odometry.sync)
         self.report = AgentReport(self.robot)
+        self.restarts = Restarts()
+        self._ratelog = RateLimitedLog(log)
         self.endpoints: list[str] = []
         self.session: zenoh.Session | None = None
         self._model = model
@@ -370,6 +382,7 @@ class Agent:
             follow_factory=self._follow_factory(),
             people=cfg.people.enabled,
             on_map_changed=self._map_changed,
+            commit=self._commit_map,
         )
         # what the map already holds (a resumed map) goes to the concepts first
         self.dialogue.on_area_events(
@@ -393,35 +406,39 @@ class Agent:
                     flush_interval=cfg.record.flush_interval,
                     stats=self.stats,
                 )
-                tasks["recorder"] = asyncio.create_task(recorder.run(), name="recorder")
+                self._spawn(tasks, "recorder", recorder.run, restart=False)
                 self.report.recording = str(record_path)
             queryables = self._declare(session)
             self._publish_state(pipeline.last_stamp or time.time(), force=True)
             self._odom_sub = self._subscribe(session, "odom", POSE_CODEC)
-            tasks["odometry"] = asyncio.create_task(self._odometry_task(), name="odometry")
+            self._spawn(tasks, "odometry", self._odometry_task)
             if cfg.laser.source == "lms":
                 if not await self._start_lms(stop):
                     return self.report
-                tasks["laser"] = asyncio.create_task(self._lms_task(), name="laser")
+                self._spawn(tasks, "laser", self._lms_task)
             else:
                 self._scan_sub = self._subscribe(session, "scan", LASER_SCAN_CODEC)
-                tasks["laser"] = asyncio.create_task(self._scan_bus_task(), name="laser")
+                self._spawn(tasks, "laser", self._scan_bus_task)
             self._start_dialogue(session, tasks)
-            tasks["housekeeping"] = asyncio.create_task(self._housekeeping_task(), name="housekeeping")
-            tasks["diagnostics"] = asyncio.create_task(
-                publish_diagnostics(
+            self._spawn(tasks, "housekeeping", self._housekeeping_task)
+            self._spawn(
+                tasks,
+                "diagnostics",
+                lambda: publish_diagnostics(
                     self._pubs["diagnostics"],
                     self.stats,
                     self.robot,
                     period=cfg.diagnostics.period,
                     extra=self._extra,
                 ),
-                name="diagnostics",
             )
             if self._on_ready is not None:
                 self._on_ready(self)
             stopper = asyncio.create_task(stop.wait(), name="stop")
-            done, _ = await asyncio.wait({stopper, *tasks.values()}, return_when=asyncio.FIRST_COMPLETED)
+            # a task that ends (its input closed) stops the agent; the recorder's end does not
+            # (it ends when its file failed: the agent runs on without recording)
+            watched = {t for name, t in tasks.items() if name != "recorder"}
+            done, _ = await asyncio.wait({stopper, *watched}, return_when=asyncio.FIRST_COMPLETED)
             stopper.cancel()
             for t in done:
                 if t is not stopper and not t.cancelled() and t.exception() is not None:
@@ -432,6 +449,20 @@ class Agent:
         if failure is not None:
             raise failure
         return self.report
+
+    def _spawn(
+        self,
+        tasks: dict[str, asyncio.Task[Any]],
+        name: str,
+        start: Callable[[], Any],
+        *,
+        restart: bool = True,
+    ) -> None:
+        """Start a supervised task (see the module docstring)."""
+        tasks[name] = asyncio.create_task(
+            supervise(name, start, restarts=self.restarts, restart=restart, ratelog=self._ratelog),
+            name=name,
+        )
 
     async def _start_lms(self, stop: asyncio.Event) -> bool:
         from drivers.sick.driver import LMS2xx
@@ -525,16 +556,17 @@ class Agent:
             try:
                 result = pipeline.process(m.scan, m.pose)
                 self._publish(result)
-            except Exception:
+            except Exception as exc:
                 self.report.errors += 1
-                n = self.report.errors
-                if n <= 5 or n % 100 == 0:  # a bug or a strange scan: say so, but do not flood the log
-                    log.exception(
-                        "processing scan %d (stamp %.3f) failed (%d so far); it is skipped",
-                        m.scan.seq,
-                        m.scan.stamp,
-                        n,
-                    )
+                # a bug or a strange scan: say so, but do not flood the log
+                self._ratelog(
+                    "scan",
+                    "processing scan %d (stamp %.3f) failed (%d so far); it is skipped",
+                    m.scan.seq,
+                    m.scan.stamp,
+                    self.report.errors,
+                    exc=exc,
+                )
                 continue
             self._last_processed_stamp = m.scan.stamp
             self._process_ms.append((time.perf_counter() - t0) * 1e3)
@@ -672,19 +704,21 @@ class Agent:
         )
         self._status_sub = subscribe_stream(session, self.robot, "base/status", stats=self.stats)
         intent_stats = self.stats.stream("dialogue/intent")
-        tasks["dialogue"] = asyncio.create_task(
-            run_dialogue(
-                self.dialogue,
-                self._intent_sub,
-                self._status_sub,
+        dialogue, intent_sub, status_sub = self.dialogue, self._intent_sub, self._status_sub
+        self._spawn(
+            tasks,
+            "dialogue",
+            lambda: run_dialogue(
+                dialogue,
+                intent_sub,
+                status_sub,
                 self._send,
                 invalid=lambda: intent_stats.add("invalid"),
             ),
-            name="dialogue",
         )
         if self._recogniser is not None:
             self._camera_sub = subscribe_stream(session, self.robot, "camera", capacity=1, stats=self.stats)
-            tasks["camera"] = asyncio.create_task(self._camera_task(), name="camera")
+            self._spawn(tasks, "camera", self._camera_task)
 
     def _send(self, out: Outgoing) -> None:
         self._pubs[out.stream].put(out.message)
@@ -725,27 +759,47 @@ class Agent:
             log.error("the concepts snapshot is not a valid loci.concepts/1: %s", exc)
 
     async def _camera_task(self) -> None:
-        """Recognise objects in camera frames while the dialogue looks around (newest frame only)."""
-        import cv2
-        import numpy as np
+        """Recognise objects in camera frames while the dialogue looks around (newest frame only).
 
+        A frame is decoded off the event loop, and only if its header says it is no larger
+        than ``[camera]``'s ``width`` x ``height`` (and its bytes fit such a frame); a larger
+        or undecodable frame is counted ``invalid`` on ``camera`` and skipped.
+        """
         assert self._camera_sub is not None and self.dialogue is not None
+        cam = self.config.camera
         with contextlib.suppress(BusClosed):
             while True:
                 frame = await self._camera_sub.recv()
                 if not self.dialogue.looking or frame.jpeg is None:
                     continue
-                image = cv2.imdecode(np.frombuffer(frame.jpeg, np.uint8), cv2.IMREAD_COLOR)
-                if image is None:
+                try:
+                    image = await asyncio.to_thread(
+                        decode_image, frame.jpeg, max_width=cam.width, max_height=cam.height
+                    )
+                except ProtocolError as exc:
                     self.stats.stream("camera").add("invalid")
+                    self._ratelog(
+                        "camera/frame", "camera: refused frame %d: %s", frame.seq, exc, level=logging.WARNING
+                    )
                     continue
                 try:
                     detections = await asyncio.to_thread(self._recogniser.recognise, image)
-                except Exception:
-                    log.exception("object recognition failed on frame %d", frame.seq)
+                except Exception as exc:
+                    self._ratelog(
+                        "camera/recognise", "object recognition failed on frame %d", frame.seq, exc=exc
+                    )
                     continue
                 for out in await self.dialogue.on_detections(detections, frame.stamp):
                     self._send(out)
+
+    async def _commit_map(self) -> None:
+        """Save the map now if it changed since the last save (the dialogue awaits this before
+        it acknowledges a fact about an area: the area must survive a kill with the fact)."""
+        if self._dirty and self.pipeline is not None:
+            saves = self.report.saves
+            await self._save()
+            if self.report.saves == saves:
+                raise DataError(f"the map could not be saved to {self.config.state.path}; see the log")
 
     async def _save(self) -> None:
         pipeline = self.pipeline
@@ -768,6 +822,7 @@ class Agent:
             "sync": self.sync.stats.as_dict(),
             "latency_ms": {"process": _percentiles(self._process_ms), "age": _percentiles(self._age_ms)},
             "errors": self.report.errors,
+            "restarts": self.restarts.as_dict(),
             "saves": self.report.saves,
         }
         if pipeline is not None:
@@ -847,6 +902,7 @@ class Agent:
         snap = self.stats.snapshot()
         s = self.sync.stats
         r.scans_processed = self.pipeline.scans if self.pipeline else 0
+        r.restarts = self.restarts.as_dict()
         r.drops = {
             "driver": self._lms.stats.dropped if self._lms is not None else 0,
             "scan_queue": snap.get("scan", {}).get("dropped", 0) if self._scan_sub is not None else 0,

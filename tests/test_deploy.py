@@ -20,7 +20,7 @@ from typing import Any
 import pytest
 import zenoh
 
-from agent.bus.session import BusConfig, close_session, listening_endpoints
+from agent.bus.session import BusConfig, close_session, listening_endpoints, open_session
 from agent.cli import build_parser
 from agent.config import LMS_VARIANTS, load_config
 from knowledge.errors import ConfigError
@@ -42,8 +42,6 @@ INSTALLED = {
     "/etc/loci/zenoh/credentials.txt": ZENOH / "credentials.txt.example",
 }
 VENV_LOCI = "/opt/loci/venv/bin/loci"
-INTENT = "loci/r/dialogue/intent"
-HEARD = "loci/r/dialogue/heard"
 
 
 def installed(path: str) -> Path:
@@ -218,44 +216,253 @@ class Inbox:
             return self._cond.wait_for(lambda: pred(self.samples), timeout)
 
 
-def test_only_the_dialogue_user_may_send_intents(router: str) -> None:
-    users = credentials()
-    sessions: list[zenoh.Session] = []
-    try:
-        agent = _client(router, "agent.json5")
-        sessions.append(agent)
-        inbox = Inbox()
-        sub = agent.declare_subscriber("loci/r/**", inbox)
-        dialogue = _client(router, "dialogue.json5")
-        sessions.append(dialogue)
-        tools = _client(router, "agent.json5", "tools", users["tools"])
-        sessions.append(tools)
-        agent_user = _client(router, "agent.json5")  # the agent's user in another process
-        sessions.append(agent_user)
+#: What each user may publish (put), as docs/deploy.md's table says: loci/<robot>/<stream>.
+MAY_PUBLISH: dict[str, set[str]] = {
+    "agent": {
+        "scan",
+        "scan/full",
+        "tf",
+        "place",
+        "graph",
+        "graph/scene",
+        "areas",
+        "areas/scene",
+        "diagnostics",
+        "people",
+        "people/scene",
+        "objects",
+        "map/edit",
+        "dialogue/say",
+        "dialogue/ask",
+        "base/cmd",
+        "base/goal",
+    },
+    "dialogue": {"dialogue/intent"},
+    "speech": {"dialogue/heard"},
+    "base": {"odom", "base/status", "scan", "camera", "sim/truth"},
+    "tools": set(),
+}
+#: Wildcard puts that once reached the agent's intent subscriber (issue 18, failure 4).
+WILDCARD_PUTS = [
+    "loci/r/dialogue/*",
+    "loci/r/**",
+    "loci/r/dialogue/intent/**",
+    "**",
+    "loci/**",
+    "loci/r/*/*",
+]
 
-        # wait until the subscription has reached the router: a heard sample gets through
+
+def _user(endpoint: str, user: str) -> zenoh.Session:
+    return _client(endpoint, "agent.json5", user, credentials()[user])
+
+
+def test_each_user_publishes_only_its_keys_and_wildcard_puts_reach_nothing(router: str) -> None:
+    from agent.bus.keys import STREAMS
+
+    assert set(MAY_PUBLISH) == set(credentials())
+    assert set().union(*MAY_PUBLISH.values()) == set(STREAMS), "every stream needs a publisher"
+    keys = [f"loci/r/{s}" for s in sorted(STREAMS)] + WILDCARD_PUTS
+    sessions: dict[str, zenoh.Session] = {}
+    try:
+        for user in MAY_PUBLISH:
+            sessions[user] = _user(router, user)
+        # witnesses: a reader of everything (a tool in a session of its own: a session hears
+        # its own puts without the router) and the agent's own intent subscriber
+        witness = sessions["witness"] = _user(router, "tools")
+        inbox, intents = Inbox(), Inbox()
+        subs = [
+            witness.declare_subscriber("loci/**", inbox),
+            sessions["agent"].declare_subscriber("loci/r/dialogue/intent", intents),
+        ]
         deadline = time.monotonic() + 5.0
         while not inbox.samples and time.monotonic() < deadline:
-            dialogue.put(HEARD, b"ready?")
+            sessions["base"].put("loci/r/odom", b"ready?")
             time.sleep(0.05)
         assert inbox.samples, "no sample reached the subscriber through the router"
+        # the agent's subscriber is declared too once one of the dialogue's intents arrives
+        assert inbox.wait_for(
+            lambda _: (sessions["dialogue"].put("loci/r/dialogue/intent", b"ready?") or intents.samples) != []
+        )
+        inbox.samples.clear()
+        intents.samples.clear()
+        for user in MAY_PUBLISH:
+            session = sessions[user]
+            for key in keys:
+                session.put(key, f"{user} {key}".encode())
+        # a session's samples arrive in order: once a user's last allowed put is in, the
+        # others would be in too
+        for user, allowed in MAY_PUBLISH.items():
+            if allowed:
+                last = f"loci/r/{max(allowed)}"
+                assert inbox.wait_for(lambda s, u=user, k=last: (k, f"{u} {k}".encode()) in s), user
+        time.sleep(0.3)  # for tools, which may publish nothing at all
+        got = {p.decode() for _, p in inbox.samples if p != b"ready?"}
+        want = {f"{u} loci/r/{s}" for u, streams in MAY_PUBLISH.items() for s in streams}
+        assert got == want, f"got and must not: {sorted(got - want)}; missing: {sorted(want - got)}"
+        # what reached the agent's intent subscriber from other sessions (its own session's
+        # puts reach it without the router)
+        others = [p for _, p in intents.samples if p != b"ready?" and not p.startswith(b"agent ")]
+        assert others == [b"dialogue loci/r/dialogue/intent"]
+        for sub in subs:
+            sub.undeclare()
+    finally:
+        for s in reversed(sessions.values()):
+            close_session(s)
 
-        tools.put(INTENT, b"tools intent")
-        agent_user.put(INTENT, b"agent intent")
-        tools.put(HEARD, b"tools heard")
-        agent_user.put(HEARD, b"agent heard")
-        dialogue.put(INTENT, b"dialogue intent")
-        # each session's samples arrive in the order it sent them: once its heard sample is
-        # in, its intent would be in too
-        assert inbox.wait_for(lambda s: (HEARD, b"tools heard") in s and (HEARD, b"agent heard") in s)
-        assert inbox.wait_for(lambda s: (INTENT, b"dialogue intent") in s)
-        time.sleep(0.2)
-        intents = [p for k, p in inbox.samples if k == INTENT]
-        assert intents == [b"dialogue intent"]
+
+def test_only_the_agent_answers_state_queries_and_a_huge_message_is_dropped(router: str) -> None:
+    sessions: dict[str, zenoh.Session] = {}
+    try:
+        for user in ("agent", "dialogue", "tools", "base"):
+            sessions[user] = _user(router, user)
+        qs = [
+            sessions[u].declare_queryable(
+                "loci/r/state/graph", lambda q, u=u: q.reply(q.key_expr, u.encode())
+            )
+            for u in ("agent", "dialogue")
+        ]
+        deadline = time.monotonic() + 5.0
+        answers: list[bytes] = []
+        while not answers and time.monotonic() < deadline:
+            answers = [
+                r.ok.payload.to_bytes()
+                for r in sessions["tools"].get("loci/r/state/graph", timeout=1.0)
+                if r.ok
+            ]
+        assert answers == [b"agent"]
+        # Zenoh's own limit (transport.link.rx.max_message_size): 16 MiB, not its default 1 GiB
+        inbox = Inbox()
+        sub = sessions["tools"].declare_subscriber("loci/r/camera", inbox)
+        while not inbox.samples and time.monotonic() < deadline + 5.0:
+            sessions["base"].put("loci/r/camera", b"small")
+            time.sleep(0.05)
+        block = zenoh.CongestionControl.BLOCK  # DROP (the default) could drop "after" behind the big one
+        sessions["base"].put("loci/r/camera", b"x" * (17 << 20), congestion_control=block)
+        sessions["base"].put("loci/r/camera", b"after", congestion_control=block)
+        assert inbox.wait_for(lambda s: ("loci/r/camera", b"after") in s, timeout=15.0)
+        assert max(len(p) for _, p in inbox.samples) < 1 << 20
+        for q in qs:
+            q.undeclare()
         sub.undeclare()
+    finally:
+        for s in reversed(sessions.values()):
+            close_session(s)
+
+
+def test_the_dialogue_service_connects_as_the_dialogue_user(router: str) -> None:
+    # the unit's LOCI_BUS_CONFIG_FILE once was read by no code: the dialogue process
+    # connected as "agent" (robot.toml's config_file), which may not send intents
+    unit = read_unit(SYSTEMD / "loci-dialogue.service")
+    env = dict(v.split("=", 1) for v in values(unit, "Service", "Environment"))
+    config = load_config(ROBOT_TOML, env=env)
+    bus = dataclasses.replace(
+        config.bus, connect=(router,), config_file=str(installed(str(config.bus.config_file)))
+    )
+    assert bus.config_file == str(ZENOH / "dialogue.json5")
+    sessions = [_user(router, "tools")]
+    try:
+        inbox = Inbox()
+        sessions[0].declare_subscriber("loci/r/dialogue/intent", inbox)
+        dialogue = open_session(bus)
+        sessions.append(dialogue)
+        deadline = time.monotonic() + 5.0
+        while not inbox.samples and time.monotonic() < deadline:
+            dialogue.put("loci/r/dialogue/intent", b"from the dialogue service")
+            time.sleep(0.05)
+        assert inbox.samples, "the dialogue service's intents do not reach the agent"
     finally:
         for s in reversed(sessions):
             close_session(s)
+
+
+def _openssl(*args: str, cwd: Path) -> None:
+    subprocess.run(["openssl", *args], cwd=cwd, check=True, capture_output=True, timeout=60)
+
+
+def throwaway_ca(folder: Path) -> tuple[Path, Path, Path]:
+    """A CA and a certificate for localhost/127.0.0.1 that it signed (EC P-256, one day):
+    returns the CA certificate, the server's certificate and its key."""
+    ec = ("-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes")
+    _openssl(
+        "req",
+        "-x509",
+        *ec,
+        "-keyout",
+        "ca.key",
+        "-out",
+        "ca.pem",
+        "-days",
+        "1",
+        "-subj",
+        "/CN=loci test CA",
+        cwd=folder,
+    )
+    _openssl("req", *ec, "-keyout", "server.key", "-out", "server.csr", "-subj", "/CN=localhost", cwd=folder)
+    (folder / "ext.cnf").write_text(
+        "subjectAltName=DNS:localhost,IP:127.0.0.1\nbasicConstraints=CA:FALSE\n"
+        "keyUsage=digitalSignature\nextendedKeyUsage=serverAuth\n"
+    )
+    _openssl(
+        "x509", "-req", "-in", "server.csr", "-CA", "ca.pem", "-CAkey", "ca.key", "-CAcreateserial",
+        "-out", "server.pem", "-days", "1", "-extfile", "ext.cnf",
+        cwd=folder,
+    )  # fmt: skip
+    return folder / "ca.pem", folder / "server.pem", folder / "server.key"
+
+
+@pytest.mark.skipif(shutil.which("openssl") is None, reason="openssl is not installed")
+def test_tls_router_with_its_certificate_on_loopback(tmp_path: Path) -> None:
+    # docs/deploy.md, "TLS": the router listens on tls/ with its certificate and key; a client
+    # names the CA that signed it (root_ca_certificate) and still logs in with its password
+    (tmp_path / "good").mkdir()
+    (tmp_path / "other").mkdir()
+    ca, cert, key = throwaway_ca(tmp_path / "good")
+    other_ca, _, _ = throwaway_ca(tmp_path / "other")
+    cfg = zenoh.Config.from_file(str(ZENOH / "router.json5"))
+    cfg.insert_json5("listen/endpoints", json.dumps(["tls/127.0.0.1:0"]))
+    cfg.insert_json5(
+        "transport/auth/usrpwd/dictionary_file", json.dumps(str(ZENOH / "credentials.txt.example"))
+    )
+    cfg.insert_json5("transport/link/tls/listen_certificate", json.dumps(str(cert)))
+    cfg.insert_json5("transport/link/tls/listen_private_key", json.dumps(str(key)))
+    cfg.insert_json5("adminspace/enabled", "true")
+    router = zenoh.open(cfg)
+    sessions: list[zenoh.Session] = []
+    try:
+        (port,) = {e.rsplit(":", 1)[1] for e in listening_endpoints(router) if e.startswith("tls/")}
+        endpoint = f"tls/localhost:{port}"
+
+        def client(user: str, root_ca: Path | None) -> zenoh.Session:
+            c = zenoh.Config.from_file(str(ZENOH / "agent.json5"))
+            c.insert_json5("connect/endpoints", json.dumps([endpoint]))
+            c.insert_json5("transport/auth/usrpwd/user", json.dumps(user))
+            c.insert_json5("transport/auth/usrpwd/password", json.dumps(credentials()[user]))
+            if root_ca is not None:
+                c.insert_json5("transport/link/tls/root_ca_certificate", json.dumps(str(root_ca)))
+            session = zenoh.open(c)
+            sessions.append(session)
+            return session
+
+        reader, base = client("tools", ca), client("base", ca)
+        inbox = Inbox()
+        reader.declare_subscriber("loci/r/odom", inbox)
+        deadline = time.monotonic() + 5.0
+        while not inbox.samples and time.monotonic() < deadline:
+            base.put("loci/r/odom", b"over TLS")
+            time.sleep(0.05)
+        assert ("loci/r/odom", b"over TLS") in inbox.samples
+        # a client that does not trust the router's CA, or trusts another, cannot connect
+        for root_ca in (None, other_ca):
+            with pytest.raises(zenoh.ZError):
+                client("base", root_ca)
+        # nor a plain TCP client on the TLS port
+        with pytest.raises(zenoh.ZError):
+            _client(f"tcp/127.0.0.1:{port}", "agent.json5")
+    finally:
+        for s in reversed(sessions):
+            close_session(s)
+        close_session(router)
 
 
 @pytest.mark.parametrize(
@@ -429,3 +636,12 @@ def test_docs_cover_every_deploy_file() -> None:
         assert (REPO / named).exists(), f"docs/deploy.md names {named}, which does not exist"
     for path in INSTALLED:
         assert path in doc, f"docs/deploy.md does not say what goes to {path}"
+
+
+def test_docs_table_of_users_is_what_the_router_enforces() -> None:
+    # the table in docs/deploy.md, section 6: user -> keys it may publish (the wire test above
+    # checks MAY_PUBLISH against the router)
+    rows = re.findall(r"^\| `(\w+)` \| [^|]+ \| ([^|]+) \| ([^|]+) \|$", DOC.read_text(), re.MULTILINE)
+    table = {user: set(re.findall(r"`([\w/]+)`", publish)) - {"state/*"} for user, publish, _ in rows}
+    assert table == MAY_PUBLISH
+    assert all(sub.strip() == "`loci/**`" for _, _, sub in rows)

@@ -43,6 +43,7 @@ import zenoh
 
 from agent.bus.codecs import Codec, codec_for, split_encoding
 from agent.bus.keys import STREAMS, Policy, stream_key
+from agent.ratelog import RateLimitedLog
 from knowledge.errors import ProtocolError
 
 T = TypeVar("T")
@@ -151,26 +152,6 @@ class BusStats:
         return {s.name: s.snapshot() for s in streams}
 
 
-class _RateLimitedLog:
-    """Logs the first problem at once, then at most one line per ``period`` with a count."""
-
-    def __init__(self, period: float = 10.0) -> None:
-        self.period = period
-        self._last = -float("inf")
-        self._suppressed = 0
-
-    def __call__(self, msg: str, *args: Any) -> None:
-        now = time.monotonic()
-        if now - self._last < self.period:
-            self._suppressed += 1
-            return
-        if self._suppressed:
-            msg += f" ({self._suppressed} more since the last report)"
-        self._suppressed = 0
-        self._last = now
-        log.warning(msg, *args)
-
-
 class BusClosed(Exception):
     """The subscription was closed (raised by :meth:`Subscription.recv`)."""
 
@@ -223,8 +204,7 @@ class Subscription(Generic[T]):
         self._wake_pending = False
         self._congested = False
         self._closed = False
-        self._warn_invalid = _RateLimitedLog()
-        self._warn_dropped = _RateLimitedLog()
+        self._log = RateLimitedLog(log, level=logging.WARNING)
         self._sub = session.declare_subscriber(key, self._on_sample)
 
     # ---- Zenoh's thread ------------------------------------------------------------------
@@ -237,11 +217,17 @@ class Subscription(Generic[T]):
             item = self._decode(RawSample.from_zenoh(sample))
         except (ProtocolError, ValueError) as exc:
             self.stats.add("invalid")
-            self._warn_invalid("%s: dropped an invalid message: %s", self.stats.name, exc)
+            self._log("invalid", "%s: dropped an invalid message: %s", self.stats.name, exc)
             return
-        except Exception:
+        except Exception as exc:  # a decoder bug: logged in full once per kind, then counted
             self.stats.add("invalid")
-            log.exception("%s: decoding a message failed unexpectedly", self.stats.name)
+            self._log(
+                "decode",
+                "%s: decoding a message failed unexpectedly",
+                self.stats.name,
+                exc=exc,
+                level=logging.ERROR,
+            )
             return
         self._offer(item)
 
@@ -264,7 +250,8 @@ class Subscription(Generic[T]):
                     if len(self._items) >= self.capacity:
                         self._congested = True
                         self.stats.add("dropped")
-                        self._warn_dropped(
+                        self._log(
+                            "stalled",
                             "%s: the consumer is stalled (queue of %d full); dropping new messages",
                             self.stats.name,
                             self.capacity,

@@ -14,6 +14,11 @@ our type                    wire schema                 notes
 
 The last two are for viewing only: they are encoded, never decoded.
 
+Every decoder checks the payload's size before parsing (:data:`MAX_SCAN_BYTES`,
+:data:`MAX_POSE_BYTES`, :data:`MAX_FRAME_BYTES`; JSON: :mod:`agent.bus.schemas`) and raises
+:class:`ProtocolError`, never another exception, on any input
+(``python -m agent.tools.fuzz``, docs/results/reliability.md).
+
 Fields Foxglove has no slot for travel as extra protobuf fields numbered from 1001, which
 protobuf readers (Foxglove's included) skip: a scan's ``seq`` (1001, varint), ``range_min``
 (1002), ``range_max`` (1003), ``scan_time`` (1004) and the exact ``angle_increment`` (1005,
@@ -54,6 +59,13 @@ FRAME_TRANSFORM = "foxglove.FrameTransform"
 #: Zenoh encodings (the part before ``;``) of the two payload families.
 PROTOBUF_ENCODING = "application/protobuf"
 JSON_ENCODING = "application/json"
+
+#: Largest payloads the decoders accept, bytes, checked before parsing: a scan of 65,535
+#: doubles (and as many intensities) is about 1 MiB, a pose about 100 bytes; a camera frame is
+#: limited again by the camera's size (:func:`drivers.camera.jpeg.decode_image`).
+MAX_SCAN_BYTES = 2 * 1024 * 1024
+MAX_POSE_BYTES = 64 * 1024
+MAX_FRAME_BYTES = 16 * 1024 * 1024
 
 # our extra protobuf field numbers (see the module docstring)
 _SEQ, _RANGE_MIN, _RANGE_MAX, _SCAN_TIME, _ANGLE_INC = 1001, 1002, 1003, 1004, 1005
@@ -113,6 +125,13 @@ def _timestamp(stamp: float) -> fg.Timestamp:
     return fg.Timestamp(int(sec), int(nsec))
 
 
+def _check_size(data: bytes, limit: int, what: str) -> None:
+    if not isinstance(data, bytes | bytearray | memoryview):
+        raise ProtocolError(f"{what}: a payload must be bytes, got {type(data).__name__}")
+    if len(data) > limit:
+        raise ProtocolError(f"{what}: payload of {len(data)} bytes exceeds {limit}")
+
+
 def _read_timestamp(raw: bytes) -> float:
     f = pw.fields_by_number(raw)
     sec = pw.last_int64(f, 1, "timestamp.seconds")
@@ -155,6 +174,7 @@ def encode_laser_scan(scan: LaserScan) -> bytes:
 
 def decode_laser_scan(data: bytes) -> LaserScan:
     """``foxglove.LaserScan`` bytes as a :class:`LaserScan` (the sensor pose is not kept)."""
+    _check_size(data, MAX_SCAN_BYTES, LASER_SCAN)
     f = pw.fields_by_number(data)
     stamp = _read_timestamp(pw.last_bytes(f, 1, "timestamp"))
     frame_id = pw.last_string(f, 2, "frame_id")
@@ -213,6 +233,7 @@ def encode_pose(pose: Pose2D) -> bytes:
 
 def decode_pose(data: bytes) -> Pose2D:
     """``foxglove.PoseInFrame`` bytes as a :class:`Pose2D` (x, y and the yaw of the rotation)."""
+    _check_size(data, MAX_POSE_BYTES, POSE_IN_FRAME)
     f = pw.fields_by_number(data)
     stamp = _read_timestamp(pw.last_bytes(f, 1, "timestamp"))
     frame_id = pw.last_string(f, 2, "frame_id")
@@ -255,6 +276,7 @@ def encode_camera_frame(frame: CameraFrame, quality: int = 90) -> bytes:
 
 def decode_camera_frame(data: bytes) -> CameraFrame:
     """``foxglove.CompressedImage`` (JPEG) bytes as a :class:`CameraFrame` carrying the JPEG."""
+    _check_size(data, MAX_FRAME_BYTES, COMPRESSED_IMAGE)
     f = pw.fields_by_number(data)
     fmt = pw.last_string(f, 3, "format").lower()
     if fmt not in ("jpeg", "jpg"):

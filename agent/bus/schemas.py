@@ -8,6 +8,12 @@ such as "edges join existing nodes") and the JSON Schema document that MCAP reco
 so Foxglove knows the fields. :data:`SCHEMAS` holds the project's schemas; other modules may
 :meth:`SchemaRegistry.register` more.
 
+What arrives is checked before it is parsed: its size (:data:`MAX_JSON_BYTES`, or the smaller
+``max_bytes`` of the schema the receiver expects: 64 KiB for intents and utterances) and the
+nesting depth of its arrays and objects (:data:`MAX_JSON_DEPTH`; a 2 kB payload of a thousand
+nested arrays once made the parser raise ``RecursionError``, which stopped the agent). Any
+input at all gives a message or :class:`ProtocolError`, never another exception.
+
 Numbers must be finite (``NaN``/``Infinity`` are not JSON and are refused), integers are
 not booleans, and objects accept extra keys unless built with ``extra=False``.
 """
@@ -21,11 +27,37 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from knowledge.errors import ProtocolError
 
 _SCHEMA_ID = re.compile(r"(loci\.[a-z][a-z0-9_.]*)/([1-9][0-9]*)")
-#: Largest JSON payload accepted on receipt, bytes.
+#: Largest JSON payload accepted on receipt, bytes (a schema may allow less: ``max_bytes``).
 MAX_JSON_BYTES = 8 * 1024 * 1024
+#: Deepest nesting of arrays and objects accepted on receipt (the project's messages nest 5 deep).
+MAX_JSON_DEPTH = 32
+#: ``max_bytes`` of the small messages people and tools send (intents, utterances, commands).
+SMALL_MESSAGE_BYTES = 64 * 1024
+# a JSON string, escapes included (unrolled loop: linear time on any input)
+_JSON_STRING = re.compile(rb'"[^"\\]*(?:\\.[^"\\]*)*"', re.DOTALL)
+_OPEN = np.zeros(256, np.int8)
+_OPEN[[ord("["), ord("{")]] = 1
+_OPEN[[ord("]"), ord("}")]] = -1
+
+
+def json_depth(payload: bytes) -> int:
+    """The deepest nesting of arrays and objects in JSON text, found without parsing it.
+
+    Brackets inside strings do not count. For text that is not JSON the result is an upper
+    bound of what a parser would meet before failing. Linear time and memory in the payload.
+    """
+    opens = payload.count(b"[") + payload.count(b"{")
+    if opens <= 1:
+        return opens
+    text = _JSON_STRING.sub(b'""', payload) if b'"' in payload else payload
+    steps = _OPEN[np.frombuffer(text, np.uint8)]
+    steps = steps[steps != 0].astype(np.int32)
+    return int(np.cumsum(steps).max()) if steps.size else 0
 
 
 @dataclass(frozen=True)
@@ -143,6 +175,11 @@ def _check(spec: Spec, value: Any, path: str) -> None:
             raise ProtocolError(f"{path}: expected a string, got {_type_name(value)}")
         if spec.max_length is not None and len(value) > spec.max_length:
             raise ProtocolError(f"{path}: longer than {spec.max_length} characters")
+        if not value.isascii():
+            try:
+                value.encode("utf-8")
+            except UnicodeEncodeError as exc:  # a lone surrogate ("\ud800"): not text
+                raise ProtocolError(f"{path}: not valid Unicode text ({exc.reason})") from None
     elif kind in ("number", "integer"):
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise ProtocolError(
@@ -236,6 +273,7 @@ class MessageSchema:
         checks: functions of the whole (type-checked) message returning a reason string
             when something across fields is wrong (e.g. an edge to a missing node), else None.
         description: one line for the docs and the JSON Schema.
+        max_bytes: the largest payload of this message accepted on receipt.
     """
 
     name: str
@@ -243,6 +281,7 @@ class MessageSchema:
     body: Spec
     checks: tuple[Callable[[dict[str, Any]], str | None], ...] = ()
     description: str = ""
+    max_bytes: int = MAX_JSON_BYTES
 
     def __post_init__(self) -> None:
         if not _SCHEMA_ID.fullmatch(f"{self.name}/{self.version}"):
@@ -325,14 +364,31 @@ class SchemaRegistry:
         return schema
 
     def decode(self, payload: bytes, expected: str | None = None) -> dict[str, Any]:
-        """Parse and validate a JSON payload; :class:`ProtocolError` says what is wrong."""
-        if len(payload) > MAX_JSON_BYTES:
-            raise ProtocolError(f"JSON payload of {len(payload)} bytes exceeds {MAX_JSON_BYTES}")
+        """Parse and validate a JSON payload; :class:`ProtocolError` says what is wrong.
+
+        The size (``expected``'s ``max_bytes``, else :data:`MAX_JSON_BYTES`) and the nesting
+        depth (:data:`MAX_JSON_DEPTH`) are checked before parsing; no input raises anything
+        but :class:`ProtocolError`.
+        """
+        limit = self.get(expected).max_bytes if expected is not None else MAX_JSON_BYTES
+        if not isinstance(payload, bytes | bytearray | memoryview):
+            raise ProtocolError(f"a JSON payload must be bytes, got {type(payload).__name__}")
+        payload = bytes(payload)
+        if len(payload) > limit:
+            what = expected or "JSON"
+            raise ProtocolError(f"{what} payload of {len(payload)} bytes exceeds {limit}")
+        depth = json_depth(payload)
+        if depth > MAX_JSON_DEPTH:
+            raise ProtocolError(f"JSON nested {depth} deep; at most {MAX_JSON_DEPTH} levels are accepted")
         try:
             message = json.loads(payload, parse_constant=_refuse_constant)
-        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        except ProtocolError:
+            raise
+        except (ValueError, RecursionError) as exc:  # JSONDecodeError, bad UTF-8, a 5000-digit number
             raise ProtocolError(f"not valid JSON: {exc}") from exc
-        self.validate(message, expected)
+        schema = self.validate(message, expected)
+        if len(payload) > schema.max_bytes:
+            raise ProtocolError(f"{schema.id} payload of {len(payload)} bytes exceeds {schema.max_bytes}")
         assert isinstance(message, dict)
         return message
 
@@ -560,6 +616,7 @@ UTTERANCE = MessageSchema(
         },
     ),
     description="something a person said (a speech recogniser's or a console's text)",
+    max_bytes=SMALL_MESSAGE_BYTES,
 )
 
 INTENT = MessageSchema(
@@ -575,6 +632,7 @@ INTENT = MessageSchema(
     ),
     checks=(_intent_checks,),
     description="a structured request to the agent; every intent gets exactly one reply",
+    max_bytes=SMALL_MESSAGE_BYTES,
 )
 
 SAY = MessageSchema(
@@ -659,6 +717,7 @@ TWIST = MessageSchema(
         {"stamp": _STAMP},
     ),
     description="a velocity command for the base (it stops when commands stop coming)",
+    max_bytes=SMALL_MESSAGE_BYTES,
 )
 
 BASE_GOAL = MessageSchema(
@@ -695,6 +754,7 @@ BASE_STATUS = MessageSchema(
         },
     ),
     description="what the base does: a goal became active, was reached, failed, or the base collided",
+    max_bytes=SMALL_MESSAGE_BYTES,
 )
 
 TRUTH = MessageSchema(
@@ -833,6 +893,7 @@ MAP_EDIT = MessageSchema(
         },
     ),
     description="a change of the map that scans do not explain (the tutor said a doorway was none)",
+    max_bytes=SMALL_MESSAGE_BYTES,
 )
 
 for _schema in (PEOPLE, OBJECTS, CONCEPTS, MAP_EDIT):

@@ -239,7 +239,7 @@ MAY_PUBLISH: dict[str, set[str]] = {
     },
     "dialogue": {"dialogue/intent"},
     "speech": {"dialogue/heard"},
-    "base": {"odom", "base/status", "scan", "camera", "sim/truth"},
+    "base": {"odom", "base/status", "scan", "camera", "sim/truth", "pose/truth"},
     "tools": set(),
 }
 #: Wildcard puts that once reached the agent's intent subscriber (issue 18, failure 4).

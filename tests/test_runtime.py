@@ -435,10 +435,15 @@ def test_agent_on_bus_scans_waits_out_stopped_odometry_and_ignores_bad_messages(
                 encoding=zenoh.Encoding("application/protobuf;foxglove.LaserScan"),
             )
             session.put(f"loci/{ROBOT}/scan", b'{"x": 1}', encoding=zenoh.Encoding("application/json"))
+            # one valid odometry sample and one scan stamped 10⁶ s ahead (a wrong clock, or a
+            # forged message) are refused: they used to stop classification until a restart
+            odom.put(Pose2D(3.0, 2.0, 0.0, stamp=time.time() + 1e6))
+            scans.put(_room_scan(grid, (3.0, 2.0, 0.0), time.time() + 1e6, 10**6))
             # odometry is back: processing resumes
             await drive(1.0, with_odometry=True)
             await asyncio.sleep(0.3)
             assert agent.pipeline.scans >= processed + 10
+            assert agent.sync.stats.odom_future == 1 and agent.sync.stats.future_stamp == 1
             stop.set()
             report = await asyncio.wait_for(run, 10)
             assert report.invalid == {"scan": 2}

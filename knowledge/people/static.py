@@ -34,61 +34,60 @@ class StaticParams:
         settle: seconds a cell must have been hit for its obstacle to count as static.
         forget: seconds without a hit after which a cell starts afresh.
         reach: metres around a point whose cells are looked at.
+        interval: seconds; scans closer than this to the last one remembered are skipped.
     """
 
     cell: float = 0.1
     settle: float = 3.0
     forget: float = 2.0
     reach: float = 0.1
+    interval: float = 0.1
 
     def __post_init__(self) -> None:
         for name in ("cell", "settle", "forget"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"StaticParams.{name} must be a positive number, got {v!r}")
-        if not (math.isfinite(self.reach) and self.reach >= 0):
-            raise ValueError(f"StaticParams.reach must be >= 0 metres, got {self.reach!r}")
-
-
-def _keys(ij: np.ndarray) -> np.ndarray:
-    return (ij[:, 0].astype(np.int64) << 32) | (ij[:, 1].astype(np.int64) & 0xFFFFFFFF)
+        for name in ("reach", "interval"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"StaticParams.{name} must be >= 0, got {v!r}")
 
 
 class StaticCells:
     """The first and last hit time of each cell (see the module docstring); bounded by
-    ``forget``: cells not hit for that long are dropped."""
+    ``forget``: cells not hit for that long are dropped (swept every ``forget`` seconds)."""
 
     def __init__(self, params: StaticParams | None = None) -> None:
         self.params = params or StaticParams()
-        self._keys = np.zeros(0, dtype=np.int64)  # sorted
-        self._first = np.zeros(0, dtype=np.float64)
-        self._last = np.zeros(0, dtype=np.float64)
+        self._cells: dict[tuple[int, int], list[float]] = {}  # cell -> [first hit, last hit]
         self._time = -math.inf
+        self._swept = -math.inf
 
     def __len__(self) -> int:
-        return int(self._keys.size)
+        return len(self._cells)
 
     def update(self, points: np.ndarray, stamp: float) -> None:
-        """The scan at ``stamp`` hit ``points`` (``(k, 2)`` metres, tracking frame)."""
+        """The scan at ``stamp`` hit ``points`` (``(k, 2)`` metres, tracking frame). Scans
+        closer than ``interval`` seconds to the last one taken change nothing (a 75 Hz laser
+        need not be remembered at 75 Hz to know what stood still for seconds)."""
         prm = self.params
         t = float(stamp)
+        if t - self._time < prm.interval:
+            return
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        pts = pts[np.isfinite(pts).all(axis=1)]
-        keys = np.unique(_keys(np.floor(pts / prm.cell)))
-        alive = self._last >= t - prm.forget
-        k, first, last = self._keys[alive], self._first[alive], self._last[alive]
-        i = np.searchsorted(k, keys).clip(0, max(k.size - 1, 0))
-        known = (k.size > 0) & (k[i] == keys) if k.size else np.zeros(keys.size, dtype=bool)
-        last = last.copy()
-        last[i[known]] = t
-        new = keys[~known]
-        if new.size:
-            k = np.concatenate((k, new))
-            first = np.concatenate((first, np.full(new.size, t)))
-            last = np.concatenate((last, np.full(new.size, t)))
-            order = np.argsort(k, kind="stable")
-            k, first, last = k[order], first[order], last[order]
-        self._keys, self._first, self._last = k, first, last
+        ij = np.floor(pts[np.isfinite(pts).all(axis=1)] / prm.cell).astype(np.int64)
+        cells = self._cells
+        stale = t - prm.forget
+        for key in set(zip(ij[:, 0].tolist(), ij[:, 1].tolist(), strict=True)):
+            rec = cells.get(key)
+            if rec is None or rec[1] < stale:
+                cells[key] = [t, t]
+            else:
+                rec[1] = t
+        if t - self._swept >= prm.forget:
+            self._cells = {k: v for k, v in cells.items() if v[1] >= stale}
+            self._swept = t
         self._time = t
 
     def static(self, points: np.ndarray) -> np.ndarray:
@@ -97,14 +96,15 @@ class StaticCells:
         prm = self.params
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
         out = np.zeros(pts.shape[0], dtype=bool)
-        if not self._keys.size or not pts.shape[0]:
-            return out
-        settled = (self._time - self._first >= prm.settle) & (self._last >= self._time - prm.forget)
         r = math.ceil(prm.reach / prm.cell)
-        base = np.floor(pts / prm.cell).astype(np.int64)
-        for di in range(-r, r + 1):
-            for dj in range(-r, r + 1):
-                keys = _keys(base + np.array([di, dj], dtype=np.int64))
-                i = np.searchsorted(self._keys, keys).clip(0, self._keys.size - 1)
-                out |= (self._keys[i] == keys) & settled[i]
+        stale, settled = self._time - prm.forget, self._time - prm.settle
+        for k, (i, j) in enumerate(np.floor(pts / prm.cell).astype(np.int64).tolist()):
+            for di in range(-r, r + 1):
+                for dj in range(-r, r + 1):
+                    rec = self._cells.get((i + di, j + dj))
+                    if rec is not None and rec[1] >= stale and rec[0] <= settled:
+                        out[k] = True
+                        break
+                if out[k]:
+                    break
         return out

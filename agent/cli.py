@@ -42,12 +42,41 @@ def build_parser() -> argparse.ArgumentParser:
         ),
         epilog="Run 'loci COMMAND --help' for the options of a command.",
     )
-    parser.add_argument("-v", "--verbose", action="count", default=0, help="debug log output")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv: debug)")
     parser.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)
+    _log_options_everywhere(sub)
     return parser
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("genius-loci")
+    except PackageNotFoundError:  # run from a source tree that was never installed
+        return "(not installed)"
+
+
+def _log_options_everywhere(sub: argparse._SubParsersAction) -> None:
+    """``-v`` and ``-q`` are also accepted after a command (``loci replay run.mcap -v``), at
+    every level of sub-commands, as if given before the command."""
+    for parser in sub.choices.values():
+        known = {opt for action in parser._actions for opt in action.option_strings}
+        if "-v" not in known:
+            parser.add_argument(
+                "-v", "--verbose", action="count", default=argparse.SUPPRESS, help=argparse.SUPPRESS
+            )
+        if "-q" not in known and "--quiet" not in known:
+            parser.add_argument(
+                "-q", "--quiet", action="store_true", default=argparse.SUPPRESS, help=argparse.SUPPRESS
+            )
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                _log_options_everywhere(action)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

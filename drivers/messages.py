@@ -1,4 +1,4 @@
-"""Typed sensor messages shared by the drivers, the simulator and (later) the Zenoh/MCAP codecs.
+"""Typed sensor messages shared by the drivers, the simulator and the Zenoh/MCAP codecs.
 
 Small frozen dataclasses with units in their docstrings. Arrays inside them are made
 read-only so a message can be handed to several consumers without copies.

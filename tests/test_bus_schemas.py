@@ -129,3 +129,13 @@ def test_json_schema_documents_describe_the_fields() -> None:
     assert set(place["required"]) == {"schema", "stamp", "label", "probabilities"}
     assert place["properties"]["node"]["type"] == ["integer", "null"]
     assert place["properties"]["probabilities"]["additionalProperties"]["maximum"] == 1
+
+
+def test_the_docs_show_every_schema_as_the_code_checks_it() -> None:
+    """docs/bus.md's field table is made from the registry: a schema changed in the code and
+    not in the docs (or the other way round) fails here, with the table to paste."""
+    from pathlib import Path
+
+    doc = (Path(__file__).resolve().parent.parent / "docs" / "bus.md").read_text(encoding="utf-8")
+    shown = doc.split("<!-- schemas:begin -->\n", 1)[1].split("\n<!-- schemas:end -->", 1)[0]
+    assert shown == SCHEMAS.markdown_table(), "docs/bus.md is stale; paste:\n" + SCHEMAS.markdown_table()

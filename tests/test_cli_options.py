@@ -40,3 +40,23 @@ def test_fraction(text: str, ok: bool) -> None:
     else:
         with pytest.raises(argparse.ArgumentTypeError, match=r"\(0, 1\)"):
             fraction(text)
+
+
+def test_version_and_log_options_after_the_command() -> None:
+    import subprocess
+    import sys
+
+    from agent.cli import build_parser
+
+    out = subprocess.run(
+        [sys.executable, "-m", "agent.cli", "--version"], capture_output=True, text=True, check=False
+    )
+    assert out.returncode == 0 and out.stdout.startswith("loci ")
+    parser = build_parser()
+    # -v and -q after a command (and after a sub-command) as before it
+    assert parser.parse_args(["replay", "run.mcap", "-v"]).verbose == 1
+    assert parser.parse_args(["-v", "replay", "run.mcap"]).verbose == 1
+    assert parser.parse_args(["replay", "run.mcap"]).verbose == 0
+    assert parser.parse_args(["evaluate", "log", "r.mcap", "--labels", "l.npz", "-vv"]).verbose == 2
+    assert parser.parse_args(["replay", "run.mcap", "-q"]).quiet is True
+    assert parser.parse_args(["-q", "replay", "run.mcap"]).quiet is True

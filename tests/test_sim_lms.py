@@ -33,6 +33,7 @@ from drivers.sim.lms_world import (
     ray_circle_ranges,
     walking_person,
 )
+from drivers.sim.world import load_world
 from knowledge.errors import MapError
 from knowledge.metric.grid import OccupancyGrid
 
@@ -158,8 +159,10 @@ def test_world_specs(tmp_path: Path) -> None:
         load_world_grid(str(png))
     with pytest.raises(MapError, match="no such map file"):
         load_world_grid(str(tmp_path / "missing.yaml"))
-    with pytest.raises(MapError, match="integer seed"):
+    with pytest.raises(MapError, match="comes a seed"):
         load_world_grid("gen:x")
+    # one syntax for every simulator command: the tour's world works here too
+    assert load_world_grid("demo:0").shape == load_world("demo:0")[0].shape
 
 
 def test_generated_office_world() -> None:

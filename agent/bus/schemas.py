@@ -350,6 +350,16 @@ class SchemaRegistry:
     def ids(self) -> list[str]:
         return sorted(self._schemas)
 
+    def markdown_table(self) -> str:
+        """Every schema's fields as a Markdown table (docs/bus.md shows it; a test keeps the
+        two equal, so the docs say what the code checks): required fields, then *optional*
+        ones, each with its type in short."""
+        rows = ["| schema | fields (required; *optional*) | what |", "| --- | --- | --- |"]
+        for sid in self.ids():
+            sch = self._schemas[sid]
+            rows.append(f"| `{sid}` | {_fields(sch.body)} | {sch.description} |")
+        return "\n".join(rows)
+
     def validate(self, message: Any, expected: str | None = None) -> MessageSchema:
         """Check a decoded message; ``expected`` (a schema id) refuses any other schema."""
         if not isinstance(message, dict):
@@ -400,6 +410,36 @@ class SchemaRegistry:
             return json.dumps(doc, allow_nan=False, separators=(",", ":"), ensure_ascii=False).encode("utf-8")
         except (TypeError, ValueError) as exc:
             raise ProtocolError(f"{doc.get('schema')}: cannot be written as JSON: {exc}") from exc
+
+
+def _short(spec: Spec, depth: int = 0) -> str:
+    """A spec's type in a few characters: ``int ≥ 0``, ``[{...}]``, ``room|corridor``."""
+    k = spec.kind
+    if k == "object":
+        if spec.values is not None:
+            text = "{key: " + _short(spec.values, depth + 1) + "}"
+        elif depth >= 1 or not (spec.required or spec.optional):
+            names = [f"`{n}`" for n in spec.required] + [f"*`{n}`*" for n in spec.optional]
+            text = "{" + ", ".join(names) + "}"
+        else:
+            text = "{" + _fields(spec, depth + 1) + "}"
+    elif k == "array":
+        text = "[" + (_short(spec.items, depth + 1) if spec.items is not None else "") + "]"
+    elif spec.choices:
+        text = " / ".join(str(c) for c in spec.choices)
+    else:
+        text = {"number": "num", "integer": "int", "string": "str", "boolean": "bool"}.get(k, k)
+        if spec.minimum is not None and spec.maximum is not None:
+            text += f" {spec.minimum:g}..{spec.maximum:g}"
+        elif spec.minimum is not None:
+            text += f" ≥ {spec.minimum:g}"
+    return text + (" or null" if spec.nullable else "")
+
+
+def _fields(spec: Spec, depth: int = 0) -> str:
+    req = [f"`{n}` {_short(v, depth)}" for n, v in spec.required.items()]
+    opt = [f"*`{n}`* {_short(v, depth)}" for n, v in spec.optional.items()]
+    return "; ".join(p for p in (", ".join(req), ", ".join(opt)) if p)
 
 
 def _refuse_constant(name: str) -> Any:

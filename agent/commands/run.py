@@ -26,7 +26,7 @@ def register(subparsers: Any) -> None:
             "doorway, hallway), build the navigation graph and its areas, publish them on the Zenoh "
             "bus, answer state queries, and keep the map across restarts. Stops on Ctrl-C or SIGTERM."
         ),
-        epilog="Example: loci run --config deploy/robots/rosie.toml --record 'runs/%Y%m%d-%H%M%S.mcap'",
+        epilog="Example: loci run --config deploy/robot.toml --record 'runs/%Y%m%d-%H%M%S.mcap'",
     )
     p.add_argument(
         "--config",

@@ -37,6 +37,7 @@ from types import FrameType
 from typing import TYPE_CHECKING, Any
 
 from agent.commands.options import add_bus_options, positive_float
+from drivers.sim import WORLD_HELP
 
 if TYPE_CHECKING:
     import zenoh
@@ -90,9 +91,8 @@ def register(subparsers: Any) -> None:
     )
     lms.add_argument(
         "--world",
-        metavar="MAP",
-        help="what the scanner sees: a map_server .yaml, an image (with --resolution), or gen:SEED "
-        "for a generated office (default: gen:0)",
+        metavar="WORLD",
+        help=f"what the scanner sees: {WORLD_HELP} (default: gen:0)",
     )
     lms.add_argument("--resolution", type=float, help="metres per cell of an image given as --world")
     lms.add_argument(
@@ -145,11 +145,9 @@ def _register_robot(sub: Any) -> None:
     )
     r.add_argument(
         "--world",
-        metavar="MAP",
+        metavar="WORLD",
         default="gen:0",
-        help="gen:SEED (a generated office), tour:SEED (a generated tour office), demo:SEED (the guided "
-        "tour's office, starting at its charging station), a map_server .yaml or an image with "
-        "--resolution (default: gen:0)",
+        help=f"{WORLD_HELP}; demo:SEED starts at the tour's charging station (default: gen:0)",
     )
     r.add_argument("--resolution", type=float, help="metres per cell of an image given as --world")
     add_bus_options(r, mode=True)

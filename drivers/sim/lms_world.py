@@ -14,7 +14,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Protocol
 
 import cv2
@@ -240,25 +239,11 @@ def default_sensor_pose(grid: OccupancyGrid, clearance: float = 0.3) -> Pose:
 
 
 def load_world_grid(spec: str | None, resolution: float | None = None) -> OccupancyGrid:
-    """The grid named by a ``--world`` argument.
+    """The grid named by a ``--world`` argument (:func:`drivers.sim.world.load_world`: the same
+    syntax as every simulator command)."""
+    from drivers.sim.world import load_world
 
-    ``None`` or ``gen:SEED``: a generated office (:func:`knowledge.metric.buildings.generate_building`);
-    a ``.yaml`` file: a map_server map; any other path: an image with ``resolution`` metres per cell.
-    """
-    if spec is None:
-        spec = "gen:0"
-    if spec.startswith("gen:"):
-        try:
-            seed = int(spec[4:])
-        except ValueError:
-            raise MapError(f"--world {spec}: after 'gen:' comes an integer seed, e.g. gen:7") from None
-        from knowledge.metric.buildings import generate_building
-
-        return generate_building(seed).grid
-    path = Path(spec)
-    if not path.exists():
-        raise MapError(f"--world {spec}: no such map file (give a map_server .yaml, an image, or gen:SEED)")
-    return OccupancyGrid.load(path, resolution)
+    return load_world(spec, resolution)[0]
 
 
 def people_in(grid: OccupancyGrid, centre: Point, n: int, *, seed: int = 0, reach: float = 4.0) -> list[Leg]:

@@ -59,16 +59,15 @@ from drivers.sim.lms_world import Leg, LmsWorld, default_sensor_pose, ray_circle
 from drivers.sim.objects import WorldObject
 from drivers.sim.people import SimPerson, walkers_in
 from drivers.sim.route import Route, RoutePlanner, building_tour, corridor_start, resample, split_at_turns
-from drivers.sim.world import SimWorld
+from drivers.sim.world import SimWorld, load_tour, load_world
 from knowledge.errors import ConfigError, MapError
 from knowledge.labels import CLASS_NAMES
 from knowledge.metric.beams import beam_angles
-from knowledge.metric.buildings import Building, generate_building, generate_tour_office
-from knowledge.metric.grid import OccupancyGrid
+from knowledge.metric.buildings import Building
 from knowledge.metric.raycast import cast
 
 if TYPE_CHECKING:
-    from drivers.sim.tour import TourWorld
+    pass
 
 log = logging.getLogger(__name__)
 
@@ -276,48 +275,6 @@ class RobotSample:
     space: int
     label: str | None
     collisions: int
-
-
-def load_tour(spec: str | None) -> TourWorld | None:
-    """The guided tour's world of a ``demo:SEED`` specification (None for other worlds).
-
-    Raises:
-        MapError: ``demo:`` is not followed by a seed.
-    """
-    if not spec or not spec.startswith("demo:"):
-        return None
-    from drivers.sim.tour import tour_world
-
-    try:
-        seed = int(spec[len("demo:") :])
-    except ValueError:
-        raise MapError(f"world {spec}: after 'demo:' comes a seed, e.g. demo:0") from None
-    if seed < 0:
-        raise MapError(f"world {spec}: the seed must be >= 0")
-    return tour_world(seed)
-
-
-def load_world(spec: str | None, resolution: float | None = None) -> tuple[OccupancyGrid, Building | None]:
-    """The grid (and the building, when generated) of a ``world`` specification."""
-    spec = spec or "gen:0"
-    tour = load_tour(spec)
-    if tour is not None:
-        return tour.grid, tour.building
-    for prefix, make in (("gen:", generate_building), ("tour:", generate_tour_office)):
-        if spec.startswith(prefix):
-            try:
-                seed = int(spec[len(prefix) :])
-            except ValueError:
-                raise MapError(f"world {spec}: after {prefix!r} comes a seed, e.g. {prefix}7") from None
-            building = make(seed)
-            return building.grid, building
-    path = Path(spec)
-    if not path.exists():
-        raise MapError(
-            f"world {spec}: no such map file (give a map_server .yaml, an image, gen:SEED, tour:SEED "
-            "or demo:SEED)"
-        )
-    return OccupancyGrid.load(path, resolution), None
 
 
 def furniture_pictures(building: Building) -> tuple[WorldObject, ...]:

@@ -9,13 +9,20 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy import ndimage
 
+from drivers.sim import WORLD_HELP
 from drivers.sim.objects import WorldObject
+from knowledge.errors import MapError
 from knowledge.metric.grid import OccupancyGrid
+
+if TYPE_CHECKING:
+    from drivers.sim.tour import TourWorld
+    from knowledge.metric.buildings_model import Building
 
 #: Ray marching samples a ray every this fraction of a cell.
 _MARCH_STEP_CELLS = 1.0 / 3.0
@@ -200,3 +207,52 @@ def demo_world(resolution: float = 0.05) -> SimWorld:
         WorldObject.place("whiteboard", 11.85, 5.0, math.pi, name="whiteboard"),
     )
     return SimWorld(grid, objects)
+
+
+# ---------------------------------------------------------------------------- --world
+
+
+def load_tour(spec: str | None) -> TourWorld | None:
+    """The guided tour's world of a ``demo:SEED`` specification (None for other worlds).
+
+    Raises:
+        MapError: ``demo:`` is not followed by a seed.
+    """
+    if not spec or not spec.startswith("demo:"):
+        return None
+    from drivers.sim.tour import tour_world
+
+    try:
+        seed = int(spec[len("demo:") :])
+    except ValueError:
+        raise MapError(f"world {spec}: after 'demo:' comes a seed, e.g. demo:0") from None
+    if seed < 0:
+        raise MapError(f"world {spec}: the seed must be >= 0")
+    return tour_world(seed)
+
+
+def load_world(spec: str | None, resolution: float | None = None) -> tuple[OccupancyGrid, Building | None]:
+    """The grid (and the building, when generated) of a world specification: one syntax for
+    every simulator command (:data:`WORLD_HELP`; None is ``gen:0``).
+
+    Raises:
+        MapError: a malformed seed, or no such map file.
+    """
+    from knowledge.metric.buildings import generate_building, generate_tour_office
+
+    spec = spec or "gen:0"
+    tour = load_tour(spec)
+    if tour is not None:
+        return tour.grid, tour.building
+    for prefix, make in (("gen:", generate_building), ("tour:", generate_tour_office)):
+        if spec.startswith(prefix):
+            try:
+                seed = int(spec[len(prefix) :])
+            except ValueError:
+                raise MapError(f"world {spec}: after {prefix!r} comes a seed, e.g. {prefix}7") from None
+            building = make(seed)
+            return building.grid, building
+    path = Path(spec)
+    if not path.exists():
+        raise MapError(f"world {spec}: no such map file (give {WORLD_HELP})")
+    return OccupancyGrid.load(path, resolution), None

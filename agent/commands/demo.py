@@ -35,9 +35,17 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
             "as separate processes on a loopback Zenoh bus. Writes the transcript, the MCAP recording "
             "(loci replay, Foxglove), the layered map (map.png) and summary.json to the output folder."
         ),
-        epilog="Example: loci demo --out out/tour;  loci demo --interactive  (docs/demo.md)",
+        epilog="Example: loci demo --out-dir out/tour;  loci demo --interactive  (docs/demo.md)",
     )
-    p.add_argument("--out", type=Path, default=None, help="output folder (default: out/tour-YYYYmmdd-HHMMSS)")
+    p.add_argument(
+        "--out-dir",
+        "--out",
+        dest="out",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="the folder to write into (default: out/tour-YYYYmmdd-HHMMSS; --out is the old name)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the tour's office (default 0)")
     p.add_argument(
         "--speed",

@@ -178,3 +178,17 @@ async def _watch(url: str, wanted: set[str], end_ns: int) -> tuple[dict[str, lis
         return got, probe.topics
     finally:
         await probe.close()
+
+
+def test_the_committed_layout_is_the_one_built() -> None:
+    import json as _json
+
+    from agent.live.layout import LAYOUT_FILE, layout_json
+
+    assert LAYOUT_FILE.read_text() == layout_json(), "regenerate it: python -m agent.live.layout"
+    text = LAYOUT_FILE.read_text()
+    doc = _json.loads(text)
+    assert doc["content"]
+    # every topic the layout names is one the live view serves
+    named = set(re.findall(r'"(/[a-z/]+)(?:\.|")', text))
+    assert named and named <= set(TOPICS), named - set(TOPICS)

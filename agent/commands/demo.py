@@ -23,6 +23,16 @@ def _speed(text: str) -> float:
     return v
 
 
+def _address(text: str) -> str:
+    from agent.live.config import parse_address
+
+    try:
+        parse_address(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "demo",
@@ -59,6 +69,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="type the tutor's lines yourself; 'Follow me.' also makes the tutor walk the next leg",
     )
     p.add_argument("--no-replay", action="store_true", help="skip replaying the recording at the end")
+    p.add_argument(
+        "--foxglove",
+        type=_address,
+        metavar="[HOST:]PORT",
+        help="watch the tour live in the Foxglove app: the agent serves its layers on this WebSocket "
+        "port (docs/foxglove.md)",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON at the end")
     p.set_defaults(handler=cmd_demo)
 
@@ -74,6 +91,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         speed=args.speed,
         interactive=args.interactive,
         replay=not args.no_replay,
+        foxglove=args.foxglove,
     )
     import signal
 

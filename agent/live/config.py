@@ -47,7 +47,7 @@ class FoxgloveConfig:
     listen: str = ""
     labels: str = ""
     grid_period: float = 1.0
-    resolution: float = 0.05
+    resolution: float = 0.1
 
     def __post_init__(self) -> None:
         if self.listen:

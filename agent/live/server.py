@@ -146,7 +146,7 @@ class LiveView:
         mount: tuple[float, float, float] = (0.0, 0.0, 0.0),
         labels: LabelledMap | None = None,
         grid_period: float = 1.0,
-        resolution: float = 0.05,
+        resolution: float = 0.1,
         name: str = "genius-loci",
     ) -> None:
         self.mount = tuple(float(v) for v in mount)
@@ -179,6 +179,8 @@ class LiveView:
         self._latest: dict[str, tuple[Any, int]] = {}
         self._mapper: ScanMapper | None = None
         self._last_grid = -math.inf
+        self._grid_lock = threading.Lock()
+        self._grid_busy = threading.Event()
         self._graph: Mapping[str, Any] | None = None
         self._areas: Mapping[str, Any] | None = None
         self._names: dict[int, list[str]] = {}
@@ -215,7 +217,7 @@ class LiveView:
     def _resend(self) -> None:
         fresh = self._listener.take_fresh()
         for topic in fresh:
-            kept = self._latest.get(topic)
+            kept = self._state_message(topic)
             if kept is not None and topic in self.channels:
                 self._log(topic, kept[0], kept[1])
 
@@ -270,16 +272,35 @@ class LiveView:
             self._keep("/map", layers.occupancy_grid(self._mapper.grid("scans"), stamp), ns)
 
     def on_state(self, graph: Mapping[str, Any], areas: Mapping[str, Any]) -> None:
-        """The graph and the areas changed (``loci.graph/1``, ``loci.areas/1`` messages)."""
+        """The graph and the areas changed (``loci.graph/1``, ``loci.areas/1`` messages).
+
+        Only kept while nobody watches; the scenes are built when someone subscribes."""
         self._graph, self._areas = graph, areas
-        ns = int(float(graph.get("stamp", 0.0)) * 1e9)
-        self._latest["/graph"] = (graph_scene(graph), ns)
-        self._latest["/areas"] = (layers.named_areas_scene(areas, graph, self._names), ns)
+        self._latest.pop("/graph", None)
+        self._latest.pop("/areas", None)
         if self._listener.subscriptions <= 0:
             return
         for topic in ("/graph", "/areas"):
             if self._wants(topic):
-                self._log(topic, *self._latest[topic])
+                self._log(topic, *self._state_message(topic))  # type: ignore[misc]
+
+    def _state_message(self, topic: str) -> tuple[Any, int] | None:
+        """The latest message of a state layer (built from the kept graph and areas if need be)."""
+        kept = self._latest.get(topic)
+        if (
+            kept is not None
+            or topic not in ("/graph", "/areas")
+            or self._graph is None
+            or self._areas is None
+        ):
+            return kept
+        graph, areas = self._graph, self._areas
+        ns = int(float(graph.get("stamp", 0.0)) * 1e9)
+        if topic == "/graph":
+            self._latest[topic] = (graph_scene(graph), ns)
+        else:
+            self._latest[topic] = (layers.named_areas_scene(areas, graph, self._names), ns)
+        return self._latest[topic]
 
     def concepts_due(self, period: float = 1.0) -> bool:
         """Whether to look at the conceptual map again (at most once per ``period`` seconds)."""

@@ -13,6 +13,7 @@ import math
 import re
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -192,3 +193,66 @@ def test_the_committed_layout_is_the_one_built() -> None:
     # every topic the layout names is one the live view serves
     named = set(re.findall(r'"(/[a-z/]+)(?:\.|")', text))
     assert named and named <= set(TOPICS), named - set(TOPICS)
+
+
+@pytest.mark.slow
+def test_the_running_agent_serves_its_layers_and_the_conversation(tmp_path: Path) -> None:
+    """``loci run`` with [foxglove]: scans from the bus, a client connected to the agent's
+    server gets the per-scan layers and what the robot says (an ask_place intent)."""
+    from test_runtime import ROBOT, _room_scan, write_config
+
+    from agent.bus.bridge import publish_stream
+    from agent.bus.session import BusConfig, bus_session, listening_endpoints
+    from agent.bus.testing import settle
+    from agent.config import load_config
+    from agent.runtime import Agent
+    from drivers.messages import Pose2D
+    from knowledge.metric.grid import OccupancyGrid
+    from knowledge.places.model import PlaceModel, default_model_path
+
+    occ = np.ones((82, 162), dtype=bool)
+    occ[1:-1, 1:-1] = False
+    grid = OccupancyGrid.from_masks(occ, 0.05, name="room")
+    model = PlaceModel.load(default_model_path())
+
+    async def main() -> dict[str, list]:  # type: ignore[type-arg]
+        with bus_session(BusConfig()) as session:
+            (endpoint,) = listening_endpoints(session)
+            cfg = load_config(
+                write_config(tmp_path, endpoint, None, foxglove='listen = "127.0.0.1:0"\ngrid_period = 0.2'), env={}
+            )
+            stop, ready = asyncio.Event(), asyncio.Event()
+            agent = Agent(cfg, model=model, on_ready=lambda _: ready.set())
+            run = asyncio.create_task(agent.run(stop))
+            await asyncio.wait_for(ready.wait(), 30)
+            assert agent.live is not None and agent.session is not None
+            await asyncio.to_thread(settle, session, agent.session)
+            probe = await connect(agent.live.url)
+            await probe.subscribe()
+            scans, odom = publish_stream(session, ROBOT, "scan"), publish_stream(session, ROBOT, "odom")
+            intents = publish_stream(session, ROBOT, "dialogue/intent")
+            got: dict[str, list] = {}  # type: ignore[type-arg]
+            for seq in range(40):
+                now = time.time()
+                pose = (1.0 + 0.05 * seq, 2.0, 0.0)
+                odom.put(Pose2D(*pose, stamp=now))
+                scans.put(_room_scan(grid, pose, now, seq))
+                if seq == 20:
+                    intents.put(
+                        {"schema": "loci.intent/1", "intent": "ask_place", "id": "q1", "speaker": "tutor", "args": {}}
+                    )
+                while (r := await probe.receive(0.02)) is not None:
+                    got.setdefault(r.topic, []).append(r)
+            more = await probe.collect({"/conversation", "/map"}, timeout=5)
+            for k, v in more.items():
+                got.setdefault(k, []).extend(v)
+            await probe.close()
+            stop.set()
+            await asyncio.wait_for(run, 20)
+            return got
+
+    got = asyncio.run(main())
+    assert {"/scan", "/tf", "/place", "/graph", "/map", "/conversation"} <= set(got), set(got)
+    said = [r.value.message for r in got["/conversation"]]
+    assert said and all(isinstance(s, str) and s for s in said)
+    assert got["/place"][-1].value["schema"] == "loci.place/1"

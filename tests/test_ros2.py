@@ -387,3 +387,55 @@ def test_bridge_convention_carries_real_scans_both_ways(shared_data: Path, tmp_p
     assert stats.snapshot()["ros2/scan"]["invalid"] == 1  # the garbage, counted and dropped
     (payload, attachment), *_ = side.received("loci/place")
     assert json.loads(rm.decode(payload, rm.STRING).data) == place_msg and attachment is None
+
+
+def test_static_transforms_published_before_the_interface_started_still_arrive() -> None:
+    """/tf_static is transient local: published once by a publisher with a cache (as rmw_zenoh
+    does), before the interface subscribes; the interface asks for the history and learns the mount."""
+    from zenoh.ext import CacheConfig, declare_advanced_publisher
+
+    cfg = Ros2Config(enabled=True)
+    conf = zenoh.Config()
+    conf.insert_json5("listen/endpoints", '["tcp/127.0.0.1:0"]')
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("timestamping/enabled", "true")  # as rmw_zenoh's session configuration has it
+    ros = zenoh.open(conf)
+    try:
+        loci = ros  # the agent's side plays no part here
+        iface = Ros2Interface(cfg, loci, "tb3", ros_session=ros)
+        link = rm.make(
+            "geometry_msgs/msg/TransformStamped",
+            header=rm.header(10.0, "base_link"),
+            child_frame_id="laser",
+            transform=rm.make(
+                "geometry_msgs/msg/Transform",
+                translation=rm.make("geometry_msgs/msg/Vector3", x=0.2, y=-0.05, z=0.3),
+                rotation=rm.make("geometry_msgs/msg/Quaternion", x=0.0, y=0.0, z=0.0, w=1.0),
+            ),
+        )
+        pub = declare_advanced_publisher(
+            ros,
+            iface.key(cfg.tf_static, rm.TF_MESSAGE),
+            cache=CacheConfig(max_samples=1),
+            publisher_detection=True,
+        )
+        pub.put(rm.encode(rm.make(rm.TF_MESSAGE, transforms=[link])))
+        time.sleep(0.3)
+
+        async def main() -> None:
+            task = asyncio.create_task(iface.run())
+            await asyncio.wait_for(iface.ready.wait(), 10)
+            for _ in range(100):
+                if iface.tf.mount("base_link", "laser") is not None:
+                    break
+                await asyncio.sleep(0.05)
+            task.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await task
+
+        asyncio.run(main())
+        pub.undeclare()
+    finally:
+        ros.close()
+    mount = iface.tf.mount("base_link", "laser")
+    assert mount is not None and mount.pose == pytest.approx((0.2, -0.05, 0.0))

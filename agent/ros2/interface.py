@@ -89,6 +89,7 @@ class Ros2Interface:
         self._tokens: list[Any] = []
         self._subs: list[Subscription[Any]] = []
         self._closed = False
+        self._static_sub: Any = None
         self._graph: dict[str, Any] | None = None
         self._areas: dict[str, Any] | None = None
         self.ready = asyncio.Event()
@@ -158,7 +159,7 @@ class Ros2Interface:
             )
             scans = self._subscribe(ros, "scan", rm.LASER_SCAN)
             tf = self._subscribe(ros, "tf", rm.TF_MESSAGE)
-            tf_static = self._subscribe(ros, "tf_static", rm.TF_MESSAGE)
+            tf_static = self._static_subscription(ros)
             odom = self._subscribe(ros, "odom", rm.ODOMETRY) if c.odom else None
             place = subscribe_stream(self._loci, self.robot, "place", stats=self.stats, capacity=64)
             graph = subscribe_stream(self._loci, self.robot, "graph", stats=self.stats, capacity=8)
@@ -172,7 +173,7 @@ class Ros2Interface:
             tasks = [
                 self._pump(scans, lambda m: self._on_scan(m, scan_pub)),
                 self._pump(tf, lambda m: self._on_tf(m, odom_pub)),
-                self._pump(tf_static, lambda m: self._on_tf(m, None)),
+                self._drain(tf_static, lambda m: self._on_tf(m, None)),
                 self._pump(place, lambda m: self._on_place(m, place_out)),
                 self._pump(graph, lambda m: self._on_graph(m, None, markers_out)),
                 self._pump(areas, lambda m: self._on_graph(None, m, markers_out)),
@@ -202,6 +203,52 @@ class Ros2Interface:
         )
         self._subs.append(sub)
         return sub
+
+    def _static_subscription(self, session: zenoh.Session) -> asyncio.Queue[Any]:
+        """``/tf_static`` is transient local: ROS 2 keeps the last transforms for late subscribers
+        (rmw_zenoh: an advanced publisher with a cache). An advanced subscriber with history asks
+        for them, so the mount is known even when the robot started first."""
+        from zenoh.ext import HistoryConfig, declare_advanced_subscriber
+
+        loop = asyncio.get_running_loop()
+        queue: asyncio.Queue[Any] = asyncio.Queue(maxsize=QUEUE)
+        name = f"ros2{self.topic(self.config.tf_static)}"
+        counters = self.stats.stream(name)
+
+        def put(msg: Any) -> None:
+            if queue.full():
+                counters.add("dropped")
+                return
+            queue.put_nowait(msg)
+            counters.add("delivered")
+
+        def on_sample(sample: zenoh.Sample) -> None:  # Zenoh's thread
+            counters.add("received")
+            try:
+                msg = rm.decode(sample.payload.to_bytes(), rm.TF_MESSAGE)
+            except ProtocolError as exc:
+                counters.add("invalid")
+                log.debug("%s: %s", name, exc)
+                return
+            with contextlib.suppress(RuntimeError):  # the loop closed
+                loop.call_soon_threadsafe(put, msg)
+
+        self._static_sub = declare_advanced_subscriber(
+            session,
+            self.key(self.config.tf_static, rm.TF_MESSAGE),
+            on_sample,
+            history=HistoryConfig(detect_late_publishers=True),
+        )
+        return queue
+
+    async def _drain(self, queue: asyncio.Queue[Any], handle: Callable[[Any], None]) -> None:
+        while True:
+            msg = await queue.get()
+            try:
+                handle(msg)
+            except (BadMessage, ProtocolError, ValueError) as exc:
+                self.counts["bad"] += 1
+                log.warning("ROS 2 interface: a transform was dropped: %s", exc)
 
     async def _pump(self, sub: Subscription[Any], handle: Callable[[Any], None]) -> None:
         with contextlib.suppress(BusClosed):
@@ -288,6 +335,9 @@ class Ros2Interface:
         self._closed = True
         for sub in self._subs:
             sub.close()
+        if self._static_sub is not None:
+            with contextlib.suppress(Exception):
+                self._static_sub.undeclare()
         for token in self._tokens:
             with contextlib.suppress(Exception):
                 token.undeclare()

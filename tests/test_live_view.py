@@ -219,7 +219,8 @@ def test_the_running_agent_serves_its_layers_and_the_conversation(tmp_path: Path
         with bus_session(BusConfig()) as session:
             (endpoint,) = listening_endpoints(session)
             cfg = load_config(
-                write_config(tmp_path, endpoint, None, foxglove='listen = "127.0.0.1:0"\ngrid_period = 0.2'), env={}
+                write_config(tmp_path, endpoint, None, foxglove='listen = "127.0.0.1:0"\ngrid_period = 0.2'),
+                env={},
             )
             stop, ready = asyncio.Event(), asyncio.Event()
             agent = Agent(cfg, model=model, on_ready=lambda _: ready.set())
@@ -239,7 +240,13 @@ def test_the_running_agent_serves_its_layers_and_the_conversation(tmp_path: Path
                 scans.put(_room_scan(grid, pose, now, seq))
                 if seq == 20:
                     intents.put(
-                        {"schema": "loci.intent/1", "intent": "ask_place", "id": "q1", "speaker": "tutor", "args": {}}
+                        {
+                            "schema": "loci.intent/1",
+                            "intent": "ask_place",
+                            "id": "q1",
+                            "speaker": "tutor",
+                            "args": {},
+                        }
                     )
                 while (r := await probe.receive(0.02)) is not None:
                     got.setdefault(r.topic, []).append(r)

@@ -95,7 +95,7 @@ def test_replay_served_live_to_a_real_client(tmp_path: Path, run: Run) -> None: 
     proc = subprocess.Popen(
         [
             sys.executable, "-m", "agent.cli", "-q", "replay", str(rec), "--foxglove", "127.0.0.1:0",
-            "--speed", "1", "--linger", "20", "--labels", str(labels),
+            "--speed", "3", "--linger", "20", "--labels", str(labels),
         ],
         cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
@@ -263,3 +263,39 @@ def test_the_running_agent_serves_its_layers_and_the_conversation(tmp_path: Path
     said = [r.value.message for r in got["/conversation"]]
     assert said and all(isinstance(s, str) and s for s in said)
     assert got["/place"][-1].value["schema"] == "loci.place/1"
+
+
+def test_areas_carry_the_names_the_conceptual_map_has_for_them() -> None:
+    import base64
+
+    from foxglove import messages as fg
+
+    from agent.live.probe import _make_decoder
+
+    schema = fg.SceneUpdate.get_schema()
+    decode = _make_decoder(
+        {
+            "topic": "/areas",
+            "encoding": "protobuf",
+            "schemaName": schema.name,
+            "schema": base64.b64encode(schema.data).decode(),
+        }
+    )
+    graph = {
+        "nodes": [{"id": 1, "x": 0.0, "y": 0.0}, {"id": 2, "x": 2.0, "y": 0.0}, {"id": 3, "x": 9.0, "y": 9.0}]
+    }
+    areas = {
+        "stamp": 3.0,
+        "areas": [{"id": 7, "label": "room", "nodes": [1, 2]}, {"id": 8, "label": None, "nodes": [3]}],
+    }
+    snapshot = {
+        "areas": {
+            "7": {"id": 7, "names": ["kitchen"], "types": ["Kitchen"]},
+            "8": {"id": 8, "names": [], "types": []},
+        }
+    }
+    names = layers.area_names(snapshot)
+    assert names == {7: ["kitchen", "Kitchen"]}
+    scene = decode(layers.named_areas_scene(areas, graph, names).encode())
+    texts = {t.text: (t.pose.position.x, t.pose.position.y) for t in scene.entities[0].texts}
+    assert texts == {"room #7\nkitchen, Kitchen": (1.0, 0.0), "? #8": (9.0, 9.0)}

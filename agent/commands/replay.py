@@ -31,6 +31,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from agent.commands.options import positive_float, seconds
+
 if TYPE_CHECKING:
     from collections.abc import Callable
 
@@ -73,7 +75,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--realtime", action="store_true", help="pace the messages at recorded speed")
     p.add_argument(
         "--speed",
-        type=float,
+        type=positive_float,
         metavar="FACTOR",
         help="pace the messages at FACTOR times recorded speed (--realtime is 1; default with "
         "--foxglove: 1, else as fast as possible)",
@@ -91,7 +93,7 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument(
         "--linger",
-        type=float,
+        type=seconds,
         metavar="SECONDS",
         help="with --foxglove: keep serving the final state this long after the end (default: until Ctrl-C)",
     )

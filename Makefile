@@ -35,7 +35,7 @@ $(BENCH_STAMP): $(STAMP)
 install: $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/loci demo --out $(OUT)/demo
+	$(BIN)/loci demo --out-dir $(OUT)/demo
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

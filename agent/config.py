@@ -23,7 +23,8 @@ scans wait for odometry; ``[places]`` the place model and the label window N;
 where the graph persists; ``[record]`` an optional MCAP recording; ``[diagnostics]``;
 ``[camera]`` the camera's frames; ``[conceptual]`` the conceptual map (OWL, reasoner);
 ``[objects]`` the object database of the recogniser; ``[follow]`` follow-me; ``[people]``
-people detection in every scan and the masking of their legs.
+people detection in every scan and the masking of their legs; ``[foxglove]`` the live view
+(:mod:`agent.live`); ``[ros2]`` the ROS 2 interface over Zenoh (:mod:`agent.ros2`).
 """
 
 from __future__ import annotations
@@ -41,7 +42,9 @@ from typing import Any, TypeVar
 
 from agent.bus.keys import robot_name
 from agent.bus.session import DEFAULT_AGENT_ENDPOINT, BusConfig
+from agent.live.config import FoxgloveConfig
 from agent.odom_sync import SyncParams
+from agent.ros2.config import Ros2Config
 from knowledge.errors import ConfigError
 from knowledge.metric.local_map import LocalMapParams
 from knowledge.metric.rear_beams import FullScanParams
@@ -82,6 +85,7 @@ _PATH_KEYS = {
     ("conceptual", "state"),
     ("objects", "database"),
     ("people", "model"),
+    ("foxglove", "labels"),
 }
 # keys holding lists of paths, resolved the same way
 _PATH_LIST_KEYS = {("conceptual", "ontologies")}
@@ -400,6 +404,8 @@ class AgentConfig:
     objects: ObjectsConfig = field(default_factory=ObjectsConfig)
     follow: FollowConfig = field(default_factory=FollowConfig)
     people: PeopleConfig = field(default_factory=PeopleConfig)
+    foxglove: FoxgloveConfig = field(default_factory=FoxgloveConfig)
+    ros2: Ros2Config = field(default_factory=Ros2Config)
     file: Path | None = None
 
     @property
@@ -506,6 +512,8 @@ _SECTIONS = (
     "objects",
     "follow",
     "people",
+    "foxglove",
+    "ros2",
 )
 
 
@@ -634,6 +642,9 @@ def _build(data: Mapping[str, Mapping[str, Any]], file: Path | None, env: Mappin
         conceptual = dataclasses.replace(conceptual, enabled="conceptual" in data)
     if not conceptual.state:
         conceptual = dataclasses.replace(conceptual, state=str(Path(state.dir) / "concepts.sqlite3"))
+    ros2 = build_dataclass(Ros2Config, sec("ros2"), "ros2")
+    if ros2.enabled is None:
+        ros2 = dataclasses.replace(ros2, enabled="ros2" in data)
     objects = build_dataclass(ObjectsConfig, sec("objects"), "objects")
     if not objects.database:
         objects = dataclasses.replace(objects, database=str(Path(state.dir) / "objects"))
@@ -657,5 +668,7 @@ def _build(data: Mapping[str, Mapping[str, Any]], file: Path | None, env: Mappin
         objects=objects,
         follow=build_dataclass(FollowConfig, sec("follow"), "follow"),
         people=build_dataclass(PeopleConfig, sec("people"), "people"),
+        foxglove=build_dataclass(FoxgloveConfig, sec("foxglove"), "foxglove"),
+        ros2=ros2,
         file=file,
     )

@@ -257,6 +257,9 @@ class Agent:
         self._camera_sub: Subscription[Any] | None = None
         self._concepts_version: Any = None
         self._people_shown = False
+        #: the Foxglove live view (``[foxglove]``), None when off
+        self.live: Any = None
+        self._ros2: Any = None
 
     # ------------------------------------------------------------------ setup
     def _load(self) -> tuple[PlaceModel, Pipeline]:
@@ -408,6 +411,12 @@ class Agent:
                 )
                 self._spawn(tasks, "recorder", recorder.run, restart=False)
                 self.report.recording = str(record_path)
+            if cfg.foxglove.on:
+                from agent.live.server import start_live_view
+
+                self.live = start_live_view(
+                    cfg.foxglove, mount=self.params.mount, name=f"genius-loci {self.robot}"
+                )
             queryables = self._declare(session)
             self._publish_state(pipeline.last_stamp or time.time(), force=True)
             self._odom_sub = self._subscribe(session, "odom", POSE_CODEC)
@@ -420,6 +429,11 @@ class Agent:
                 self._scan_sub = self._subscribe(session, "scan", LASER_SCAN_CODEC)
                 self._spawn(tasks, "laser", self._scan_bus_task)
             self._start_dialogue(session, tasks)
+            if cfg.ros2.on:
+                from agent.ros2.interface import Ros2Interface
+
+                self._ros2 = Ros2Interface(cfg.ros2, session, self.robot, mount=self.params.mount)
+                self._spawn(tasks, "ros2", self._ros2.run)
             self._spawn(tasks, "housekeeping", self._housekeeping_task)
             self._spawn(
                 tasks,
@@ -546,6 +560,11 @@ class Agent:
             if self._dirty and time.monotonic() - self._last_save >= interval:
                 await self._save()
             self._update_concepts_cell()
+            if self.live is not None and self.live.watched:
+                self.live.tick()
+                if self.live.concepts_due():
+                    with contextlib.suppress(Exception):  # names on the areas are a nicety
+                        self.live.on_concepts(self.concepts.snapshot() if self.concepts is not None else None)
 
     # ------------------------------------------------------------------ per scan
     def _feed(self, matched: list[Matched]) -> None:
@@ -594,6 +613,8 @@ class Agent:
             self._dirty = True
         for event in result.events:
             log.info("areas: %s", event)
+        if self.live is not None:
+            self.live.on_step(result)
         if self.dialogue is not None:
             if result.events:
                 self.dialogue.on_area_events(result.events)
@@ -620,6 +641,8 @@ class Agent:
             assert data is not None
             self._pubs["areas"].put_bytes(data)
             self._pubs["areas/scene"].put(areas_scene(areas, graph))
+        if self.live is not None:
+            self.live.on_state(self._last_graph, self._last_areas)
 
     # ------------------------------------------------------------------ dialogue, concepts, camera
     async def _start_concepts(self) -> Any:
@@ -722,6 +745,8 @@ class Agent:
 
     def _send(self, out: Outgoing) -> None:
         self._pubs[out.stream].put(out.message)
+        if self.live is not None and out.stream.startswith("dialogue/"):
+            self.live.on_say(out.stream, out.message)
 
     def _map_changed(self, edit: dict[str, Any]) -> None:
         """The dialogue changed the map (a false doorway removed): say so on ``map/edit`` (a
@@ -854,8 +879,10 @@ class Agent:
                 await asyncio.sleep(TICK / 2)
                 self._drain_odometry()
                 self._feed(self.sync.expire(time.time()))
-            for name in ("housekeeping", "diagnostics", "odometry", "dialogue", "camera"):
+            for name in ("housekeeping", "diagnostics", "odometry", "dialogue", "camera", "ros2"):
                 await _cancel(tasks.get(name))
+            if self._ros2 is not None:
+                self._ros2.close()
             for sub in (self._intent_sub, self._status_sub, self._camera_sub):
                 if sub is not None:
                     sub.close()
@@ -884,6 +911,8 @@ class Agent:
                 q.close()
             for pub in self._pubs.values():
                 pub.close()
+            if self.live is not None:
+                self.live.close()
             close_session(session)
             self.session = None
 

@@ -256,6 +256,8 @@ def test_docs_list_every_key_and_environment_variable() -> None:
         "conceptual",
         "objects",
         "follow",
+        "foxglove",
+        "ros2",
     ):
         value = getattr(cfg, section)
         for name in value.__dataclass_fields__:

@@ -8,11 +8,14 @@ import subprocess
 import sys
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
+import yaml
 
 from knowledge import labels as lbl
 from knowledge.metric.buildings import generate_building
+from knowledge.metric.grid import OccupancyGrid
 
 
 def loci(*args: str, check: bool = True) -> subprocess.CompletedProcess[str]:
@@ -87,6 +90,28 @@ def test_label_writes_codes_and_an_overlay(
     assert (labels[~b.grid.free] == 0).all()
     assert Path(summary["overlay"]).is_file()
     assert sum(summary["cells_per_class"].values()) == int(b.grid.free.sum())
+    # the labels load as a map_server map in raw mode: the codes, in the input map's place
+    assert summary["labels_yaml"] == str(tmp_path / "labels.yaml")
+    described = OccupancyGrid.from_yaml(tmp_path / "labels.yaml")
+    assert described.resolution == b.grid.resolution and described.origin == b.grid.origin
+    meta = yaml.safe_load((tmp_path / "labels.yaml").read_text())
+    assert meta["mode"] == "raw" and meta["image"] == "labels.png"
+    # the overlay has a legend strip under the map
+    overlay = cv2.imread(summary["overlay"], cv2.IMREAD_COLOR)
+    assert overlay.shape[0] > b.grid.shape[0]
+    strip = overlay[b.grid.shape[0] :]
+    for code in {int(c) for c in np.unique(labels)} - {0}:
+        bgr = np.asarray(lbl.CLASS_COLORS_BGR[code], np.uint8)
+        assert np.all(strip == bgr, axis=2).any(), f"no legend swatch for class {code}"
+
+
+def test_label_refuses_to_replace_the_input_map_with_its_yaml(tmp_path: Path) -> None:
+    b = generate_building(21, layout="straight", furniture=False)
+    map_yaml = b.grid.save(tmp_path / "office.yaml")
+    before = map_yaml.read_text()
+    r = loci("places", "label", str(map_yaml), "--out", str(tmp_path / "office.png"), check=False)
+    assert r.returncode != 0 and "would replace the input map" in r.stderr
+    assert map_yaml.read_text() == before
 
 
 def test_errors_are_clear(tmp_path: Path) -> None:

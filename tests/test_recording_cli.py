@@ -100,3 +100,14 @@ def test_loci_record_stops_cleanly_on_sigterm(tmp_path: Path) -> None:
     _, err = proc.communicate(timeout=10)
     assert proc.returncode == 0, err
     _check(out, published)
+
+
+def test_loci_record_with_nothing_on_the_bus_writes_no_file(tmp_path: Path) -> None:
+    out = tmp_path / "empty.mcap"
+    with session_pair() as (a, _):
+        (endpoint,) = listening_endpoints(a)
+        proc = _record(out, endpoint, "--duration", "1")
+        _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 1, err
+    assert "nothing was published on loci/rosie/**" in err and "no file written" in err
+    assert not out.exists()

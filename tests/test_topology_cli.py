@@ -12,10 +12,13 @@ from typing import Any
 import cv2
 import numpy as np
 import pytest
+import yaml
 
 from agent.cli import main
 from knowledge import labels as lbl
+from knowledge.labels import CLASS_COLORS_BGR
 from knowledge.metric.buildings import DOOR_ID_BASE, generate_building
+from knowledge.metric.grid import OccupancyGrid
 from knowledge.places.model import PlaceModel
 from knowledge.topology.segmentation_score import gt_rooms
 from knowledge.topology.topomap import loads
@@ -116,6 +119,16 @@ def test_topology_writes_every_output(
     assert np.array_equal(lut[regions], corrected)
     overview = read(out / "overview.png", cv2.IMREAD_COLOR)
     assert overview.shape[0] > 100
+    # a map_server YAML beside each image, placing it where the input map lies
+    source = OccupancyGrid.from_yaml(test_map[0])
+    for name in ("labels", "relaxed", "corrected", "regions", "segments"):
+        meta = yaml.safe_load((out / f"{name}.yaml").read_text())
+        assert meta["image"] == f"{name}.png" and meta["mode"] == "raw"
+        assert meta["resolution"] == source.resolution and tuple(meta["origin"]) == source.origin
+    # the overview's legend shows the colour of every class in the corrected labels
+    legend = overview[-40:]
+    for code in set(np.unique(corrected).tolist()) - {0}:
+        assert np.all(legend == np.asarray(CLASS_COLORS_BGR[code], np.uint8), axis=2).any()
     # the printed summary matches the files
     assert summary["regions"] == len(doc["nodes"]) and summary["edges"] == len(doc["edges"])
     assert sum(summary["regions_per_class"].values()) == len(doc["nodes"])

@@ -23,6 +23,16 @@ def _speed(text: str) -> float:
     return v
 
 
+def _address(text: str) -> str:
+    from agent.live.config import parse_address
+
+    try:
+        parse_address(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "demo",
@@ -35,9 +45,17 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
             "as separate processes on a loopback Zenoh bus. Writes the transcript, the MCAP recording "
             "(loci replay, Foxglove), the layered map (map.png) and summary.json to the output folder."
         ),
-        epilog="Example: loci demo --out out/tour;  loci demo --interactive  (docs/demo.md)",
+        epilog="Example: loci demo --out-dir out/tour;  loci demo --interactive  (docs/demo.md)",
     )
-    p.add_argument("--out", type=Path, default=None, help="output folder (default: out/tour-YYYYmmdd-HHMMSS)")
+    p.add_argument(
+        "--out-dir",
+        "--out",
+        dest="out",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="the folder to write into (default: out/tour-YYYYmmdd-HHMMSS; --out is the old name)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the tour's office (default 0)")
     p.add_argument(
         "--speed",
@@ -51,6 +69,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="type the tutor's lines yourself; 'Follow me.' also makes the tutor walk the next leg",
     )
     p.add_argument("--no-replay", action="store_true", help="skip replaying the recording at the end")
+    p.add_argument(
+        "--foxglove",
+        type=_address,
+        metavar="[HOST:]PORT",
+        help="watch the tour live in the Foxglove app: the agent serves its layers on this WebSocket "
+        "port (docs/foxglove.md)",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON at the end")
     p.set_defaults(handler=cmd_demo)
 
@@ -66,6 +91,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         speed=args.speed,
         interactive=args.interactive,
         replay=not args.no_replay,
+        foxglove=args.foxglove,
     )
     import signal
 

@@ -207,13 +207,19 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     la.add_argument("map", type=Path, metavar="MAP", help="map_server YAML, or an image with --resolution")
     la.add_argument("--resolution", type=float, metavar="M", help="metres per cell for image maps")
     la.add_argument("--model", type=Path, default=None, help="a place model (default: the bundled one)")
-    la.add_argument("--out", type=Path, required=True, metavar="LABELS.png", help="label image to write")
+    la.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        metavar="LABELS.png",
+        help="the label image to write (a file); LABELS.yaml, its map_server description, is written beside it",
+    )
     la.add_argument(
         "--overlay",
         type=Path,
         default=None,
         metavar="PNG",
-        help="coloured picture to write (default: LABELS.overlay.png beside --out)",
+        help="coloured picture with a legend to write (a file; default: LABELS.overlay.png beside --out)",
     )
     la.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     la.set_defaults(handler=cmd_label)
@@ -225,7 +231,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "score the labels against the floor's ground truth and write pictures of the result.",
     )
     d.add_argument(
-        "--out", type=Path, default=Path("out/places-demo"), help="output folder (default out/places-demo)"
+        "--out-dir",
+        "--out",
+        dest="out",
+        type=Path,
+        default=Path("out/places-demo"),
+        metavar="DIR",
+        help="the folder to write into (default out/places-demo; --out is the old name)",
     )
     d.add_argument("--seed", type=int, default=7, help="seed of the generated office floor (default 7)")
     d.add_argument("--model", type=Path, default=None, help="a place model (default: the bundled one)")
@@ -424,17 +436,28 @@ def cmd_label(args: argparse.Namespace) -> int:
 
     from agent.progress import Progress
     from knowledge import labels as lbl
-    from knowledge.fileio import write_image
+    from knowledge.errors import MapError
+    from knowledge.fileio import atomic_write_text, write_image
+    from knowledge.label_maps import label_map_yaml, legend_entries, with_legend, yaml_path
     from knowledge.metric.grid import OccupancyGrid
     from knowledge.places.labeling import label_map
 
+    described = yaml_path(args.out)
+    if described.resolve() == Path(args.map).resolve():
+        raise MapError(
+            f"--out {args.out} would replace the input map {args.map} with its YAML; name it otherwise"
+        )
     grid = OccupancyGrid.load(args.map, args.resolution)
     model = _load_model(args.model)
     with Progress(enabled=not args.quiet) as progress:
         result = label_map(grid, model, progress=progress)
     lbl.write_label_image(args.out, result.labels, result.legend)
+    atomic_write_text(
+        described, label_map_yaml(args.out.name, grid.resolution, grid.origin, legend=result.legend)
+    )
     overlay_path = args.overlay or args.out.with_name(args.out.stem + ".overlay.png")
-    write_image(overlay_path, lbl.overlay(grid.to_image(), result.labels))
+    picture = lbl.overlay(grid.to_image(), result.labels)
+    write_image(overlay_path, with_legend(picture, legend_entries(result.labels, result.legend)))
     counts = {c: int(np.sum(result.labels == code)) for c, code in result.codes.items()}
     area = {c: round(n * grid.resolution**2, 2) for c, n in counts.items()}
     summary = {
@@ -445,6 +468,7 @@ def cmd_label(args: argparse.Namespace) -> int:
         "cells_per_class": counts,
         "area_m2_per_class": area,
         "labels": str(args.out),
+        "labels_yaml": str(described),
         "overlay": str(overlay_path),
         "timings_s": {k: round(v, 3) for k, v in result.timings.items()},
     }
@@ -454,7 +478,7 @@ def cmd_label(args: argparse.Namespace) -> int:
     print(f"labelled {len(result.cells)} free cells of {grid.name} in {result.timings['total']:.1f} s")
     for c in result.classes:
         print(f"  {c:<10} {counts[c]:>9} cells  {area[c]:>9.1f} m²")
-    print(f"wrote {args.out} and {overlay_path}")
+    print(f"wrote {args.out}, {described} (map_server, mode raw) and {overlay_path}")
     return 0
 
 
@@ -479,7 +503,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     from agent.progress import Progress
     from knowledge import labels as lbl
-    from knowledge.fileio import write_image
+    from knowledge.fileio import atomic_write_text, write_image
+    from knowledge.label_maps import label_map_yaml, legend_entries, with_legend
     from knowledge.metric.buildings import generate_tour_office
     from knowledge.places.labeling import label_map
     from knowledge.places.metrics import format_confusion, score
@@ -509,12 +534,21 @@ def cmd_demo(args: argparse.Namespace) -> int:
     truth_img = lbl.overlay(background, building.labels)
     pred_img = lbl.overlay(background, result.labels)
     lbl.write_label_image(args.out / "labels.png", result.labels, result.legend)
+    atomic_write_text(
+        args.out / "labels.yaml",
+        label_map_yaml("labels.png", grid.resolution, grid.origin, legend=result.legend),
+    )
+    grid.save(args.out / "map.yaml")  # map.pgm + map.yaml: the occupancy map for map_server
     write_image(args.out / "map.png", background)
-    write_image(args.out / "labels.overlay.png", pred_img)
+    entries = legend_entries(np.concatenate([building.labels.ravel(), result.labels.ravel()]), result.legend)
+    write_image(args.out / "labels.overlay.png", with_legend(pred_img, entries))
     write_image(
         args.out / "comparison.png",
-        _side_by_side(
-            truth_img, pred_img, ("ground truth", f"classified ({100 * s.accuracy:.1f} % correct)")
+        with_legend(
+            _side_by_side(
+                truth_img, pred_img, ("ground truth", f"classified ({100 * s.accuracy:.1f} % correct)")
+            ),
+            entries,
         ),
     )
     summary = {
@@ -541,6 +575,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         f"(ray casting {result.timings['cast']:.1f} s, features and classification {result.timings['classify']:.1f} s)"
     )
     print(
-        f"pictures in {args.out}/: comparison.png (truth | classified), labels.overlay.png, labels.png, map.png"
+        f"pictures in {args.out}/: comparison.png (truth | classified), labels.overlay.png, labels.png "
+        "with labels.yaml, map.png, map.pgm with map.yaml"
     )
     return 0

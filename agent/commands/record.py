@@ -12,6 +12,7 @@ import asyncio
 import contextlib
 import signal
 import sys
+from pathlib import Path
 from typing import Any
 
 from agent.commands.options import add_bus_options, positive_seconds
@@ -28,11 +29,12 @@ def register(subparsers: Any) -> None:
             "sample with its schema into an MCAP file: laser scans, poses, images and scene updates as "
             "Foxglove protobuf, the rest as JSON with a JSON Schema. Runs until Ctrl-C, SIGTERM or "
             "--duration; the file is flushed every second, so even a killed recorder leaves a "
-            "readable file (loci replay reads it up to the last complete chunk)."
+            "readable file (loci replay reads it up to the last complete chunk). When nothing was "
+            "published on the robot's keys, no file is left and the exit status is 1."
         ),
         epilog=f"Example: loci record run1.mcap --robot rosie --connect {DEFAULT_AGENT_ENDPOINT} --duration 60",
     )
-    p.add_argument("output", metavar="OUT.mcap", help="the recording to write")
+    p.add_argument("output", metavar="OUT.mcap", help="the recording to write (a file)")
     add_bus_options(p, mode=True)
     p.add_argument(
         "--duration", type=positive_seconds, metavar="S", help="stop after S seconds (default: until Ctrl-C)"
@@ -92,6 +94,14 @@ async def _run(args: argparse.Namespace, robot: str, config: Any) -> int:
         sink.close()
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(sig)
+    if sink.messages == 0:
+        Path(args.output).unlink(missing_ok=True)
+        print(
+            f"loci record: nothing was published on {key} (is the agent running, robot {robot!r}, "
+            f"reachable at {', '.join(config.connect)}?); no file written",
+            file=sys.stderr,
+        )
+        return 1
     print(
         f"recorded {sink.messages} messages into {args.output} "
         f"({stats['dropped']} dropped, {stats['invalid']} invalid)",

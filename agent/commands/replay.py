@@ -31,6 +31,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from agent.commands.options import positive_float, seconds
+
 if TYPE_CHECKING:
     from collections.abc import Callable
 
@@ -71,6 +73,30 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("input", type=Path, metavar="IN.mcap", help="the recording")
     p.add_argument("--realtime", action="store_true", help="pace the messages at recorded speed")
+    p.add_argument(
+        "--speed",
+        type=positive_float,
+        metavar="FACTOR",
+        help="pace the messages at FACTOR times recorded speed (--realtime is 1; default with "
+        "--foxglove: 1, else as fast as possible)",
+    )
+    p.add_argument(
+        "--foxglove",
+        metavar="[HOST:]PORT",
+        help="serve the replay live to the Foxglove app on this WebSocket port (docs/foxglove.md)",
+    )
+    p.add_argument(
+        "--labels",
+        type=Path,
+        metavar="LABELS.yaml",
+        help="with --foxglove: a labelled map (loci places label's YAML) to show as /labels",
+    )
+    p.add_argument(
+        "--linger",
+        type=seconds,
+        metavar="SECONDS",
+        help="with --foxglove: keep serving the final state this long after the end (default: until Ctrl-C)",
+    )
     p.add_argument(
         "--out-dir",
         type=Path,
@@ -272,6 +298,7 @@ def replay_recording(
     fresh: bool = False,
     on_step: Callable[[StepResult], None] | None = None,
     progress: Callable[[str, int, int], None] | None = None,
+    on_pipeline: Callable[[Any], None] | None = None,
 ) -> ReplayOutcome:
     """Replay a recording through the pipeline (see the module docstring).
 
@@ -288,6 +315,8 @@ def replay_recording(
         fresh: ignore the initial map the live run resumed from.
         on_step: called with each processed scan's :class:`~agent.pipeline.StepResult`.
         progress: ``progress(stage, done, total)`` over the scans (when the file says how many).
+        on_pipeline: called once with the pipeline before the first message (the live view
+            reads its graph and areas).
 
     Raises:
         DataError: the file is missing or not MCAP, or has no scans of the robot.
@@ -366,6 +395,8 @@ def replay_recording(
                 log.warning("%s: map edit %s does not fit the replayed map; not applied", p, edit)
 
     apply_edits(None)  # edits made before any scan was processed
+    if on_pipeline is not None:
+        on_pipeline(pipeline)
 
     def feed(matched: list[Any]) -> None:
         for m in matched:
@@ -472,7 +503,23 @@ def _replay(args: argparse.Namespace) -> int:
     mapper = ScanMapper() if args.out_dir is not None else None
     path: list[tuple[float, float, str | None]] = []
 
+    live = _start_live(args)
+    speed = args.speed if args.speed is not None else (1.0 if args.realtime or live is not None else None)
+    held: dict[str, Any] = {}
+
+    def on_pipeline(pipeline: Any) -> None:
+        held["pipeline"] = pipeline
+        if live is not None:
+            live.mount = pipeline.params.mount
+            live.on_state(*pipeline.messages())
+
     def on_step(result: StepResult) -> None:
+        if live is not None:
+            live.on_step(result)
+            if result.graph_changed or result.areas_changed:
+                live.on_state(*held["pipeline"].messages(result.stamp))
+            else:
+                live.tick()
         if want_places:
             places.append(json.dumps(place_message(result), separators=(",", ":")))
         if mapper is not None:
@@ -486,18 +533,25 @@ def _replay(args: argparse.Namespace) -> int:
             )
             path.append((pose.x, pose.y, result.label))
 
-    with Progress(enabled=not args.quiet) as progress:
-        res = replay_recording(
-            args.input,
-            robot=args.robot,
-            model=model,
-            params=params,
-            sync=sync,
-            speed=1.0 if args.realtime else None,
-            fresh=args.fresh,
-            on_step=on_step,
-            progress=progress,
-        )
+    try:
+        with Progress(enabled=not args.quiet) as progress:
+            res = replay_recording(
+                args.input,
+                robot=args.robot,
+                model=model,
+                params=params,
+                sync=sync,
+                speed=speed,
+                fresh=args.fresh,
+                on_step=on_step,
+                progress=progress,
+                on_pipeline=on_pipeline,
+            )
+        if live is not None:
+            _linger(live, args.linger)
+    finally:
+        if live is not None:
+            live.close()
     pipeline = res.pipeline
     doc = pipeline.state_document()
     stamp = pipeline.last_stamp or 0.0
@@ -543,6 +597,46 @@ def _replay(args: argparse.Namespace) -> int:
         for w in written:
             print(f"wrote {w}")
     return 0
+
+
+def _start_live(args: argparse.Namespace) -> Any:
+    """The Foxglove live view of ``--foxglove`` (None without it)."""
+    if not args.foxglove:
+        if args.labels is not None or args.linger is not None:
+            raise SystemExit("loci replay: --labels and --linger go with --foxglove [HOST:]PORT")
+        return None
+    from agent.live.config import parse_address
+    from agent.live.server import LabelledMap, LiveView
+
+    try:
+        host, port = parse_address(args.foxglove)
+    except ValueError as exc:
+        raise SystemExit(f"loci replay: --foxglove: {exc}") from None
+    labels = LabelledMap.load(args.labels) if args.labels is not None else None
+    live = LiveView(host, port, labels=labels, name=f"genius-loci replay {args.input.name}")
+    print(f"Foxglove live view on {live.url} (open it in the Foxglove app)", file=sys.stderr, flush=True)
+    return live
+
+
+def _linger(live: Any, seconds: float | None) -> None:
+    """Keep serving the final state for ``seconds`` (None: until Ctrl-C)."""
+    import time
+
+    if seconds is not None and seconds <= 0:
+        return
+    print(
+        "replay done; serving the final state"
+        + (f" for {seconds:g} s" if seconds is not None else " until Ctrl-C"),
+        file=sys.stderr,
+        flush=True,
+    )
+    end = time.monotonic() + (seconds if seconds is not None else float("inf"))
+    try:
+        while time.monotonic() < end:
+            live.tick()
+            time.sleep(0.1)
+    except KeyboardInterrupt:
+        pass
 
 
 def summary_line(path: Path, res: ReplayOutcome) -> str:

@@ -26,7 +26,7 @@ def register(subparsers: Any) -> None:
             "doorway, hallway), build the navigation graph and its areas, publish them on the Zenoh "
             "bus, answer state queries, and keep the map across restarts. Stops on Ctrl-C or SIGTERM."
         ),
-        epilog="Example: loci run --config deploy/robot.toml --record 'runs/%Y%m%d-%H%M%S.mcap'",
+        epilog="Example: loci run --config deploy/robot.toml --record 'runs/%Y%m%d-%H%M%S.mcap' --foxglove 8765",
     )
     p.add_argument(
         "--config",
@@ -44,6 +44,12 @@ def register(subparsers: Any) -> None:
         "--state-dir", type=Path, metavar="DIR", help="where the map persists (overrides [state] dir)"
     )
     p.add_argument("--model", metavar="MODEL.npz", help="the place model (overrides [places] model)")
+    p.add_argument(
+        "--foxglove",
+        metavar="[HOST:]PORT",
+        help="serve the live view to the Foxglove app on this WebSocket port (host 127.0.0.1 unless "
+        "given; overrides [foxglove] listen; docs/foxglove.md)",
+    )
     p.set_defaults(handler=_run)
 
 
@@ -57,6 +63,7 @@ def _run(args: argparse.Namespace) -> int:
             "record.path": args.record,
             "state.dir": args.state_dir,
             "places.model": args.model,
+            "foxglove.listen": args.foxglove,
         },
     )
     return asyncio.run(_main(config))
@@ -82,6 +89,8 @@ async def _main(config: Any) -> int:
         ]
         if agent.report.recording:
             parts.append(f"recording: {agent.report.recording}")
+        if agent.live is not None:
+            parts.append(f"Foxglove: {agent.live.url}")
         print(
             f"running robot {agent.robot} ({'; '.join(parts)}); Ctrl-C to stop", file=sys.stderr, flush=True
         )

@@ -46,7 +46,9 @@ def register_topology_commands(psub: argparse._SubParsersAction[argparse.Argumen
         "  segments.png   room segments (16-bit region ids of the room/corridor/hallway regions, the other\n"
         "                 free cells grown into them; input for 'loci places segment-score')\n"
         "  topomap.json   the topological map (schema loci.topomap/1, see docs/topology.md)\n"
-        "  overview.png   the labels before and after, the regions and the graph",
+        "  overview.png   the labels before and after, the regions and the graph, with a legend\n"
+        "and beside each of the five images its map_server YAML (labels.yaml, ...; mode raw, the\n"
+        "input map's resolution and origin), so they load as map layers in ROS and Foxglove.",
         epilog="Example: loci places topology lab_intel.png --resolution 0.05 --free-grey 250 --out-dir out/intel",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -61,7 +63,9 @@ def register_topology_commands(psub: argparse._SubParsersAction[argparse.Argumen
         "(the IPA segmentation maps: 250); default: map_server thresholds",
     )
     t.add_argument("--model", type=Path, default=None, help="a place model (default: the bundled one)")
-    t.add_argument("--out-dir", type=Path, required=True, metavar="DIR", help="folder for the outputs")
+    t.add_argument(
+        "--out-dir", type=Path, required=True, metavar="DIR", help="the folder to write the outputs into"
+    )
     t.add_argument(
         "--iterations", type=int, default=50, help="relaxation iterations (default 50, the book's)"
     )
@@ -178,6 +182,7 @@ def cmd_topology(args: argparse.Namespace) -> int:
     from agent.progress import Progress
     from knowledge import labels as lbl
     from knowledge.fileio import atomic_write_text, write_image
+    from knowledge.label_maps import label_map_yaml, legend_entries, with_legend, yaml_path
     from knowledge.places.model import PlaceModel, default_model_path
     from knowledge.places.topology_pipeline import TopologyConfig, build_topology
     from knowledge.topology.topomap import (
@@ -212,6 +217,12 @@ def cmd_topology(args: argparse.Namespace) -> int:
     lbl.write_label_image(paths["corrected"], result.corrected, legend)
     write_image(paths["regions"], region_image(result.graph))
     write_image(paths["segments"], result.segments.astype(np.uint16))
+    for key in ("labels", "relaxed", "corrected", "regions", "segments"):
+        ids = key in ("regions", "segments")
+        text = label_map_yaml(
+            paths[key].name, grid.resolution, grid.origin, legend=None if ids else legend, regions=ids
+        )
+        atomic_write_text(yaml_path(paths[key]), text)
     doc = result.document({"model": str(model_path), "map_file": str(args.map)})
     atomic_write_text(paths["graph"], dumps(doc))
     bg = map_background(grid)
@@ -223,7 +234,8 @@ def cmd_topology(args: argparse.Namespace) -> int:
             ("region graph", draw_graph(result.graph, bg)),
         ]
     )
-    write_image(paths["overview"], pic)
+    present = np.concatenate([result.initial.ravel(), result.relaxed.ravel(), result.corrected.ravel()])
+    write_image(paths["overview"], with_legend(pic, legend_entries(present, legend)))
 
     free = grid.free
     n_free = int(free.sum())

@@ -54,6 +54,8 @@ class DemoOptions:
     replay: bool = True
     timeouts: TourTimeouts = field(default_factory=TourTimeouts)
     startup_timeout: float = 120.0
+    #: ``[HOST:]PORT`` of the agent's Foxglove live view (None: none)
+    foxglove: str | None = None
 
 
 class Screen:
@@ -187,7 +189,12 @@ def run_demo(opts: DemoOptions, screen: Screen | None = None) -> dict[str, Any]:
         if not wait_for_path(link, 30.0, children):
             raise _failed(children, "the simulated robot's LMS did not appear")
         config = write_agent_config(folder / "agent.toml", robot=ROBOT, port=pa, lms=link, folder=folder)
-        children.start("agent", ["run", "--config", str(config)])
+        live = ["--foxglove", opts.foxglove] if opts.foxglove else []
+        children.start("agent", ["run", "--config", str(config), *live])
+        if opts.foxglove:
+            screen.line(
+                f"Foxglove live view of the agent on ws://{opts.foxglove if ':' in opts.foxglove else '127.0.0.1:' + opts.foxglove}"
+            )
         children.start(
             "dialogue",
             [

@@ -49,6 +49,12 @@ BENCHMARKS: list[tuple[str, str, list[str], str]] = [
         "the agent per scan: latency telegram → place (target p99 < 5 ms), sustained rate, memory over an hour",
     ),
     (
+        "live",
+        "agent.tools.bench_live",
+        [],
+        "the Foxglove live view's cost per scan: off, served with no client, watched by one client (target p99 < 5 ms)",
+    ),
+    (
         "replay",
         "agent.tools.bench_replay",
         [],

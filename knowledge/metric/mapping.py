@@ -171,6 +171,13 @@ class ScanMapper:
         ox, oy = self._origin
         _integrate(self._hits, self._misses, x, y, ex, ey, self.params.resolution, ox, oy)
 
+    def copy(self) -> ScanMapper:
+        """An independent copy of the counts so far (to build a grid elsewhere)."""
+        other = ScanMapper(self.params)
+        other._hits, other._misses, other._origin = self._hits.copy(), self._misses.copy(), self._origin
+        other.scans = self.scans
+        return other
+
     def grid(self, name: str = "scans") -> OccupancyGrid:
         """The map so far (image orientation, origin at its lower-left corner)."""
         hits, misses = self._hits, self._misses

@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from knowledge.labels import CORRIDOR, DOORWAY, HALLWAY, IPA_CODES, ROOM, read_label_image
-from knowledge.metric.buildings import (
+from sim.buildings import (
     DOOR_ID_BASE,
     LAYOUTS,
     Building,

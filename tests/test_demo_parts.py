@@ -16,8 +16,8 @@ from agent.demo import messages
 from agent.demo.processes import Children, free_port
 from agent.demo.tour_run import TAUGHT, teach_objects, write_agent_config
 from agent.demo.tutor_control import TutorControl
-from drivers.sim.robot import SimRobot, SimRobotConfig
-from drivers.sim.tour import tour_world
+from sim.robot import SimRobot, SimRobotConfig
+from sim.tour import tour_world
 
 
 def test_tutor_commands_are_validated() -> None:
@@ -103,8 +103,8 @@ def test_the_agent_configuration_loads(tmp_path: Path) -> None:
 
 
 def test_the_taught_objects_are_recognised_in_their_pictures(tmp_path: Path) -> None:
-    from drivers.sim.objects import object_texture
     from knowledge.objects import ObjectDatabase, ObjectRecogniser
+    from sim.objects import object_texture
 
     tour = tour_world(0)
     names = teach_objects(tmp_path / "objects", tour)

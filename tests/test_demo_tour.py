@@ -17,7 +17,7 @@ from typing import Any
 
 import pytest
 
-from drivers.sim.tour import tour_world
+from sim.tour import tour_world
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from knowledge.metric.beams import beam_angles
-from knowledge.metric.buildings import Building, Door, generate_building
 from knowledge.metric.local_map import LocalMap
 from knowledge.metric.raycast import cast
 from knowledge.navigation.doorways import (
@@ -19,6 +18,7 @@ from knowledge.navigation.doorways import (
     measure_opening,
     scan_points,
 )
+from sim.buildings import Building, Door, generate_building
 
 FULL = beam_angles(360)
 SICK = beam_angles(361, math.pi)

@@ -311,10 +311,10 @@ def test_closed_loop_follows_a_walker_down_a_corridor_and_loses_them_through_a_d
     laser's sight. Another person walks the other way, passing 0.63 m from the target.
     """
     from drivers.messages import LaserScan
-    from drivers.sim.lms_world import Leg, ray_circle_ranges
-    from drivers.sim.people import SimPerson
-    from drivers.sim.robot import Goal, SimRobot, SimRobotConfig
     from knowledge.people.pipeline import PeoplePipeline
+    from sim.lms_world import Leg, ray_circle_ranges
+    from sim.people import SimPerson
+    from sim.robot import Goal, SimRobot, SimRobotConfig
 
     cfg = SimRobotConfig(
         world="gen:1", start=START, laser="360", beams=BEAMS, scan_rate=25.0, scan_range=10.0

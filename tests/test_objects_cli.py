@@ -16,10 +16,10 @@ import pytest
 import agent.cli as cli
 from agent.commands.objects import default_db_dir
 from drivers.messages import Pose2D
-from drivers.sim.camera import CameraMount, VirtualCamera
-from drivers.sim.objects import WorldObject, object_texture
-from drivers.sim.world import SimWorld
 from knowledge.metric.grid import OccupancyGrid
+from sim.camera_view import CameraMount, VirtualCamera
+from sim.objects import WorldObject, object_texture
+from sim.world import SimWorld
 
 REPO = Path(__file__).resolve().parent.parent
 MODULE = "agent.commands.objects"

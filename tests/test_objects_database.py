@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drivers.sim.objects import texture
 from knowledge.errors import ModelError
 from knowledge.objects import ObjectDatabase, class_name
 from knowledge.objects.database import FORMAT, INDEX, file_name
+from sim.objects import texture
 
 
 def tex(kind: str, name: str | None = None) -> np.ndarray:

@@ -1,6 +1,6 @@
 """Object recognition on frames rendered by the virtual camera (real SIFT, real FLANN, real RANSAC).
 
-The database is taught the sim objects' pictures (drivers/sim/objects.py), exactly what the
+The database is taught the sim objects' pictures (sim/objects.py), exactly what the
 demo does; the frames are rendered from poses with the pictures at known places, so every
 expected answer comes from the scene's geometry, not from the recogniser.
 """
@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 
 from drivers.messages import Pose2D
-from drivers.sim.camera import CameraMount, VirtualCamera
-from drivers.sim.objects import WorldObject, object_texture, texture
-from drivers.sim.world import SimWorld
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.objects import Detection, ObjectDatabase, ObjectRecogniser, RecognitionParams, extract_features
 from knowledge.objects.recognition import plausible_outline
+from sim.camera_view import CameraMount, VirtualCamera
+from sim.objects import WorldObject, object_texture, texture
+from sim.world import SimWorld
 
 W, H, HFOV = 640, 480, 60.0
 #: Taught: name → sim kind. Two couches: same drawer, same palette, different seeds.

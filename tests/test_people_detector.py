@@ -10,12 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drivers.sim.lms_world import Leg, LmsWorld
 from knowledge.errors import ModelError, NotFittedError
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.people.detector import DEFAULT_MODEL, FORMAT, LegDetector
 from knowledge.people.features import DEFAULT_COLUMNS, FEATURE_CODES, N_FEATURES, segment_features
 from knowledge.people.segmentation import segment_scan
+from sim.lms_world import Leg, LmsWorld
 
 N_BEAMS = 768
 INC = 0.006135923322290182

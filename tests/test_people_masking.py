@@ -14,13 +14,13 @@ import pytest
 
 from agent.pipeline import PeopleParams, Pipeline, PipelineParams
 from drivers.messages import LaserScan, Pose2D
-from drivers.sim.lms_world import LmsWorld, ray_circle_ranges
-from drivers.sim.people import SimPerson
-from drivers.sim.tour import FOLLOW_DISTANCE, TourWorld, tour_world
 from knowledge.people.detector import LegDetector, SegmentDetection
 from knowledge.people.masking import fill_masked, free_standing, person_beams, unknown_masked
 from knowledge.people.static import StaticCells, StaticParams
 from knowledge.places.model import PlaceModel, default_model_path
+from sim.lms_world import LmsWorld, ray_circle_ranges
+from sim.people import SimPerson
+from sim.tour import FOLLOW_DISTANCE, TourWorld, tour_world
 
 INC = math.pi / 360  # 0.5°
 N = 361

@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from drivers.sim.lms_world import LmsWorld
-from drivers.sim.people import Gait, SimPerson, clear_path, legs_of, walkers_in
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.people.detector import LegDetector
 from knowledge.people.pipeline import PeoplePipeline
+from sim.lms_world import LmsWorld
+from sim.people import Gait, SimPerson, clear_path, legs_of, walkers_in
 
 N_BEAMS = 768
 INC = 0.006135923322290182

@@ -27,11 +27,11 @@ from agent.pipeline import (
     place_message,
 )
 from drivers.messages import LaserScan, Pose2D
-from knowledge.metric.buildings import Building, Door, generate_building
 from knowledge.metric.raycast import cast
 from knowledge.navigation import persistence
 from knowledge.navigation.graph import GraphParams
 from knowledge.places.model import PlaceModel, default_model_path
+from sim.buildings import Building, Door, generate_building
 
 STEP = 0.05  # metres between scans
 TURN = math.radians(10)  # radians between scans when turning in place
@@ -256,9 +256,9 @@ def test_people_come_with_every_step_and_the_parameters_round_trip() -> None:
     """A person walks across a round room, 0.15 m per scan, 1.5 m ahead of a 360° laser:
     detected, tracked in the odometry frame, and once the track has walked ``min_travel``
     masked from the classifier's scan (which then equals the empty room's)."""
-    from drivers.sim.lms_world import ray_circle_ranges
     from knowledge.errors import ConfigError
     from knowledge.people.pipeline import PeopleFrame
+    from sim.lms_world import ray_circle_ranges
 
     model = PlaceModel.load(default_model_path())
     n, inc = 720, math.pi / 360

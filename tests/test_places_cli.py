@@ -14,8 +14,8 @@ import pytest
 import yaml
 
 from knowledge import labels as lbl
-from knowledge.metric.buildings import generate_building
 from knowledge.metric.grid import OccupancyGrid
+from sim.buildings import generate_building
 
 
 def loci(*args: str, check: bool = True) -> subprocess.CompletedProcess[str]:

@@ -9,7 +9,6 @@ import pytest
 
 from knowledge import labels as lbl
 from knowledge.errors import MapError
-from knowledge.metric.buildings import generate_building
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.places.dataset import (
     LabelledMap,
@@ -23,6 +22,7 @@ from knowledge.places.labeling import class_codes, label_map
 from knowledge.places.metrics import score
 from knowledge.places.model import PlaceModel
 from knowledge.places.training import TrainingConfig, merge_classes, train_place_model
+from sim.buildings import generate_building
 
 FAST = TrainingConfig(stride=10, rounds=12, n_beams=90, classes=("room", "corridor", "doorway"))
 

@@ -30,11 +30,11 @@ from agent.pipeline import Pipeline, PipelineParams, areas_message, graph_messag
 from agent.recording.recorder import McapSink, recording_metadata
 from agent.recording.replay import McapMessages
 from drivers.messages import LaserScan, Pose2D
-from knowledge.metric.buildings import generate_building
 from knowledge.metric.raycast import cast
 from knowledge.navigation import persistence
 from knowledge.navigation.graph import GraphParams
 from knowledge.places.model import PlaceModel, default_model_path
+from sim.buildings import generate_building
 
 REPO = Path(__file__).resolve().parent.parent
 ROBOT = "rosie"

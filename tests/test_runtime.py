@@ -38,11 +38,11 @@ from agent.recording.replay import McapMessages
 from agent.runtime import Agent
 from drivers.messages import LaserScan, Pose2D
 from drivers.sim.lms import VirtualLMS
-from drivers.sim.lms_world import LmsWorld
-from knowledge.metric.buildings import generate_building
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.metric.raycast import cast
 from knowledge.places.model import PlaceModel, default_model_path
+from sim.buildings import generate_building
+from sim.lms_world import LmsWorld
 
 REPO = Path(__file__).resolve().parent.parent
 ROBOT = "testbot"

@@ -25,9 +25,9 @@ from drivers.messages import LaserScan
 from drivers.sick.constants import Mode, Reply
 from drivers.sick.driver import LMS2xx
 from drivers.sim.lms import Faults, VirtualLMS
-from drivers.sim.lms_world import LmsWorld
 from knowledge.errors import DeviceError, DeviceTimeout, ProtocolError
 from knowledge.metric.grid import OccupancyGrid
+from sim.lms_world import LmsWorld
 
 HW_PORT = os.environ.get("LOCI_LMS_PORT")
 

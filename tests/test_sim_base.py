@@ -18,9 +18,9 @@ from drivers.sim.base import (
     SimBase,
     SimBaseRunner,
 )
-from drivers.sim.world import SimWorld, demo_world
 from knowledge.errors import DeviceTimeout
 from knowledge.metric.grid import OccupancyGrid
+from sim.world import SimWorld, demo_world
 
 QUIET = OdometryNoise(0.0, 0.0, 0.0)
 

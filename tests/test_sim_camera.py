@@ -19,10 +19,11 @@ import pytest
 
 from drivers.camera import open_camera
 from drivers.messages import Pose2D
-from drivers.sim.camera import CameraMount, SimCameraSource, VirtualCamera
-from drivers.sim.objects import CATALOGUE, WorldObject, object_texture, texture
-from drivers.sim.world import SimWorld, demo_world
+from drivers.sim.camera import SimCameraSource
 from knowledge.metric.grid import OccupancyGrid
+from sim.camera_view import CameraMount, VirtualCamera
+from sim.objects import CATALOGUE, WorldObject, object_texture, texture
+from sim.world import SimWorld, demo_world
 
 W, H, HFOV = 640, 480, 60.0
 FX = (W / 2) / math.tan(math.radians(HFOV) / 2)

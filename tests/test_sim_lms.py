@@ -23,7 +23,9 @@ from drivers.sick import telegrams as tg
 from drivers.sick.codec import Acknowledge, StreamParser, Telegram
 from drivers.sick.constants import ACK, NAK, Mode
 from drivers.sim.lms import Faults, VirtualLMS
-from drivers.sim.lms_world import (
+from knowledge.errors import MapError
+from knowledge.metric.grid import OccupancyGrid
+from sim.lms_world import (
     LEG_RADIUS,
     Leg,
     LmsWorld,
@@ -33,9 +35,7 @@ from drivers.sim.lms_world import (
     ray_circle_ranges,
     walking_person,
 )
-from drivers.sim.world import load_world
-from knowledge.errors import MapError
-from knowledge.metric.grid import OccupancyGrid
+from sim.world import load_world
 
 REPO = Path(__file__).resolve().parent.parent
 

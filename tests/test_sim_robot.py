@@ -30,13 +30,13 @@ from agent.bus.testing import wait_until
 from drivers.messages import LaserScan, Pose2D
 from drivers.sick.driver import LMS2xx
 from drivers.sim.base import OdometryNoise
-from drivers.sim.robot import STATUSES, Goal, Mount, SimRobot, SimRobotConfig, StatusReport
-from drivers.sim.route import RoutePlanner, building_tour, corridor_start, split_at_turns
-from drivers.sim.world import SimWorld
 from knowledge.errors import ProtocolError
 from knowledge.metric.beams import beam_angles
-from knowledge.metric.buildings import DOOR_ID_BASE, Building, generate_building
 from knowledge.metric.raycast import cast
+from sim.buildings import DOOR_ID_BASE, Building, generate_building
+from sim.robot import STATUSES, Goal, Mount, SimRobot, SimRobotConfig, StatusReport
+from sim.route import RoutePlanner, building_tour, corridor_start, split_at_turns
+from sim.world import SimWorld
 
 REPO = Path(__file__).resolve().parent.parent
 ROBOT_RADIUS = 0.2

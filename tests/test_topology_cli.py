@@ -17,11 +17,11 @@ import yaml
 from agent.cli import main
 from knowledge import labels as lbl
 from knowledge.labels import CLASS_COLORS_BGR
-from knowledge.metric.buildings import DOOR_ID_BASE, generate_building
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.places.model import PlaceModel
 from knowledge.topology.segmentation_score import gt_rooms
 from knowledge.topology.topomap import loads
+from sim.buildings import DOOR_ID_BASE, generate_building
 
 REPO = Path(__file__).resolve().parent.parent
 RES = 0.1

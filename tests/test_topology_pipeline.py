@@ -10,7 +10,6 @@ import pytest
 
 from knowledge.errors import ModelError
 from knowledge.labels import CORRIDOR, DOORWAY, HALLWAY, ROOM
-from knowledge.metric.buildings import generate_building
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.places.dataset import LabelledMap
 from knowledge.places.features import default_feature_names
@@ -30,6 +29,7 @@ from knowledge.places.topology_pipeline import (
 from knowledge.places.training import HALLWAY_AS_CORRIDOR, TrainingConfig, train_place_model
 from knowledge.topology.regions import CorrectionThresholds, extract_regions, thresholds_from_training
 from knowledge.topology.topomap import dumps, loads
+from sim.buildings import generate_building
 
 RES = 0.1
 CLASSES = ("room", "corridor", "doorway")

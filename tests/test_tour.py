@@ -21,16 +21,16 @@ import pytest
 from agent.bus.schemas import INTENT_KINDS
 from agent.pipeline import Pipeline
 from drivers.messages import LaserScan, Pose2D
-from drivers.sim.camera import VirtualCamera
-from drivers.sim.lms_world import LmsWorld
-from drivers.sim.people import clear_path
-from drivers.sim.robot import SimRobot, SimRobotConfig
-from drivers.sim.route import RoutePlanner
-from drivers.sim.tour import LEG_NAMES, TourWorld, tour_world
-from drivers.sim.tutor import SCRIPT, Tutor, script_step
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.people.pipeline import PeoplePipeline
 from knowledge.places.model import PlaceModel, default_model_path
+from sim.camera_view import VirtualCamera
+from sim.lms_world import LmsWorld
+from sim.people import clear_path
+from sim.robot import SimRobot, SimRobotConfig
+from sim.route import RoutePlanner
+from sim.tour import LEG_NAMES, TourWorld, tour_world
+from sim.tutor import SCRIPT, Tutor, script_step
 
 
 @pytest.fixture(scope="module")
@@ -103,7 +103,7 @@ def _opening_width(grid: OccupancyGrid, centre: tuple[float, float]) -> float:
 
 def _crossings(path: np.ndarray, centre: tuple[float, float], width: float) -> int:
     """How often the path crosses the horizontal segment of an opening (points on it do not count)."""
-    from drivers.sim.route import resample
+    from sim.route import resample
 
     dense = resample(path, 0.01)
     keep = np.abs(dense[:, 1] - centre[1]) > 1e-9

@@ -77,8 +77,8 @@ def _add_map_sources(p: argparse.ArgumentParser, *, required_hint: str) -> None:
 
 
 def _load_maps(args: argparse.Namespace, progress: Any) -> list[Any]:
-    from knowledge.metric.buildings import generate_building
     from knowledge.places.dataset import IPA_BUILDINGS, LabelledMap, load_ipa_building, load_labelled_map
+    from sim.buildings import generate_building
 
     maps: list[LabelledMap] = []
     if len(args.map) != len(args.labels):
@@ -505,10 +505,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from knowledge import labels as lbl
     from knowledge.fileio import atomic_write_text, write_image
     from knowledge.label_maps import label_map_yaml, legend_entries, with_legend
-    from knowledge.metric.buildings import generate_tour_office
     from knowledge.places.labeling import label_map
     from knowledge.places.metrics import format_confusion, score
     from knowledge.places.model import PlaceModel, default_model_path
+    from sim.buildings import generate_tour_office
 
     t0 = time.perf_counter()
     model = PlaceModel.load(args.model or default_model_path())

@@ -4,7 +4,7 @@
 path, so ``loci sick scan PATH`` (or the agent) talks to it as to a scanner on
 ``/dev/ttyUSB0``. It runs in the foreground until Ctrl-C.
 
-``loci sim robot`` starts a whole simulated robot (:mod:`drivers.sim.robot`): a base driving
+``loci sim robot`` starts a whole simulated robot (:mod:`sim.robot`): a base driving
 in a generated office or a map, a virtual LMS on a pty seeing from the base's true pose
 (or a 360° laser publishing scans), optional people and camera. It joins the Zenoh bus and
 prints the LMS device path and the robot's name (first two lines of standard output).
@@ -37,13 +37,13 @@ from types import FrameType
 from typing import TYPE_CHECKING, Any
 
 from agent.commands.options import add_bus_options, positive_float
-from drivers.sim import WORLD_HELP
+from sim import WORLD_HELP
 
 if TYPE_CHECKING:
     import zenoh
 
     from agent.bus.bridge import Publisher
-    from drivers.sim.robot import Goal, RobotSample, SimRobot, StatusReport
+    from sim.robot import Goal, RobotSample, SimRobot, StatusReport
 
 log = logging.getLogger(__name__)
 
@@ -252,7 +252,7 @@ def _register_robot(sub: Any) -> None:
 
 def _lms(args: argparse.Namespace) -> int:
     from drivers.sim.lms import VirtualLMS
-    from drivers.sim.lms_world import LmsWorld, default_sensor_pose, load_world_grid, people_in
+    from sim.lms_world import LmsWorld, default_sensor_pose, load_world_grid, people_in
 
     grid = load_world_grid(args.world, args.resolution)
     pose = args.pose or default_sensor_pose(grid)
@@ -296,7 +296,7 @@ def _robot(args: argparse.Namespace) -> int:
     from agent.bus.keys import robot_name
     from agent.bus.session import DEFAULT_AGENT_ENDPOINT, BusConfig
     from drivers.sim.base import OdometryNoise
-    from drivers.sim.robot import Mount, SimRobot, SimRobotConfig
+    from sim.robot import Mount, SimRobot, SimRobotConfig
 
     name = robot_name(args.robot)
     listen = tuple(args.listen or ()) if args.mode == "client" else tuple(args.listen or ("tcp/127.0.0.1:0",))
@@ -438,8 +438,8 @@ async def _serve_tutor(session: zenoh.Session, name: str, tutor: Any, period: fl
 
 
 def goal_from_message(msg: dict[str, Any]) -> Goal:
-    """A ``loci.base_goal/1`` message (validated) as a :class:`~drivers.sim.robot.Goal`."""
-    from drivers.sim.robot import Goal
+    """A ``loci.base_goal/1`` message (validated) as a :class:`~sim.robot.Goal`."""
+    from sim.robot import Goal
 
     points = [msg["goal"]] if msg.get("goal") is not None else list(msg["path"])
     heading = points[-1].get("theta")
@@ -453,7 +453,7 @@ def goal_from_message(msg: dict[str, Any]) -> Goal:
 
 
 class _RobotNode:
-    """Publishes what a :class:`~drivers.sim.robot.SimRobot` produces (called on its threads)."""
+    """Publishes what a :class:`~sim.robot.SimRobot` produces (called on its threads)."""
 
     def __init__(self, session: zenoh.Session, name: str, robot: SimRobot) -> None:
         from agent.bus.bridge import publish_stream

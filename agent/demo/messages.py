@@ -3,7 +3,7 @@
 ``loci/<robot>/sim/tutor`` (``loci.tutor_cmd/1``, JSON, demo → simulator): what the tutor
 does next, one of
 
-* ``{"walk": "into_room"}``: walk a leg of the tour (:data:`drivers.sim.tour.LEG_NAMES`);
+* ``{"walk": "into_room"}``: walk a leg of the tour (:data:`sim.tour.LEG_NAMES`);
 * ``{"walk": [[x, y], ...]}``: walk these map-frame waypoints (metres);
 * ``{"stop": true}``: stand where it is.
 

@@ -1,6 +1,6 @@
 """The scripted guided tour (the book's Sect. 7.4): the tutor's lines, walks and the checks.
 
-:func:`play_tour` says each line of :data:`drivers.sim.tutor.SCRIPT` through a
+:func:`play_tour` says each line of :data:`sim.tutor.SCRIPT` through a
 :class:`~agent.demo.conversation.Conversation`, walks the tutor's legs, waits for the
 robot's reply (and the task's report for long commands) with a per-step timeout, and checks
 each step's outcome. A step that fails is recorded with what was seen and the tour goes on
@@ -32,8 +32,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from agent.demo.conversation import Conversation, Event
-from drivers.sim.tour import TourWorld
-from drivers.sim.tutor import SCRIPT, ScriptLine
+from sim.tour import TourWorld
+from sim.tutor import SCRIPT, ScriptLine
 
 __all__ = ["NEAR", "StepOutcome", "TourTimeouts", "play_tour"]
 

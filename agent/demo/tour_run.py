@@ -93,8 +93,8 @@ class Screen:
 
 def teach_objects(folder: Path, tour: Any) -> list[str]:
     """Teach the tour's :data:`TAUGHT` objects' pictures into an object database at ``folder``."""
-    from drivers.sim.objects import object_texture
     from knowledge.objects import ObjectDatabase
+    from sim.objects import object_texture
 
     if folder.exists():
         shutil.rmtree(folder)
@@ -132,7 +132,7 @@ database = "objects"
 
 [follow]
 # the tutor turns through a door or round the bucket right in front of the robot: the robot
-# goes to where it last saw the tutor, and a tutor left waiting comes back (drivers/sim/tutor.py);
+# goes to where it last saw the tutor, and a tutor left waiting comes back (sim/tutor.py);
 # allow for both before giving up
 lost_after = 12.0
 """
@@ -156,7 +156,7 @@ def run_demo(opts: DemoOptions, screen: Screen | None = None) -> dict[str, Any]:
     Raises:
         LociError: a process did not come up; the message names it and shows its last lines.
     """
-    from drivers.sim.tour import tour_world
+    from sim.tour import tour_world
 
     screen = screen or Screen()
     t_start = time.monotonic()
@@ -306,7 +306,7 @@ async def _agent_ready(conv: Conversation) -> bool:
 async def _progress(
     conv: Conversation, screen: Screen, current: Mapping[str, Any], children: Children
 ) -> None:
-    from drivers.sim.tutor import SCRIPT
+    from sim.tutor import SCRIPT
 
     while True:
         await asyncio.sleep(0.5)

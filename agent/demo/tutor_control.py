@@ -1,7 +1,7 @@
 """The simulated tutor inside the simulator process, obeying ``loci.tutor_cmd/1`` commands.
 
-:class:`TutorControl` owns a :class:`~drivers.sim.tutor.Tutor` in a
-:class:`~drivers.sim.robot.SimRobot` whose world is the guided tour (``demo:SEED``). Walk
+:class:`TutorControl` owns a :class:`~sim.tutor.Tutor` in a
+:class:`~sim.robot.SimRobot` whose world is the guided tour (``demo:SEED``). Walk
 commands queue up: the tutor walks them one after another (a leg by name, or waypoints);
 ``stop`` drops the queue and the walk under way. Everything runs on the robot's thread
 (:meth:`TutorControl.command` only queues), so the tutor and the robot never race.
@@ -16,11 +16,11 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from agent.demo.messages import state_message, validate_cmd
-from drivers.sim.tutor import Tutor
+from sim.tutor import Tutor
 
 if TYPE_CHECKING:
-    from drivers.sim.robot import RobotSample, SimRobot
-    from drivers.sim.tour import TourWorld
+    from sim.robot import RobotSample, SimRobot
+    from sim.tour import TourWorld
 
 __all__ = ["TutorControl"]
 

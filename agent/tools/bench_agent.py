@@ -1,6 +1,6 @@
 """Benchmark: the running agent — per-scan latency, the highest sustained scan rate, memory over an hour.
 
-All three drive a simulated robot (:class:`~drivers.sim.robot.SimRobot`) on a tour of a
+All three drive a simulated robot (:class:`~sim.robot.SimRobot`) on a tour of a
 generated office and ray cast its 180° front laser (361 beams, SICK LMS 2xx at 0.5°) from
 the true pose (:func:`knowledge.metric.raycast.cast`, 1 cm noise); odometry is exact, so a
 revisited place is the same place for the navigation graph (drift would make the graph grow
@@ -68,10 +68,10 @@ from drivers.sick import telegrams as tg
 from drivers.sick.codec import StreamParser, Telegram
 from drivers.sick.constants import MIRROR_HZ, UNIT_METRES, MeasuringMode, Units
 from drivers.sim.base import OdometryNoise
-from drivers.sim.robot import SimRobot, SimRobotConfig
 from knowledge.fileio import atomic_write_text
 from knowledge.metric.raycast import cast
 from knowledge.places.model import PlaceModel, default_model_path
+from sim.robot import SimRobot, SimRobotConfig
 
 #: The LMS 2xx at 180°/0.5°: beams, scans per second, range maximum in centimetre units.
 N_BEAMS = 361

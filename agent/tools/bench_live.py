@@ -36,9 +36,9 @@ from agent.live.probe import connect
 from agent.live.server import LiveView
 from agent.pipeline import Pipeline, PipelineParams
 from drivers.messages import LaserScan, Pose2D
-from knowledge.metric.buildings import generate_building
 from knowledge.metric.raycast import cast
 from knowledge.places.model import PlaceModel, default_model_path
+from sim.buildings import generate_building
 
 TARGET_MS = 5.0
 

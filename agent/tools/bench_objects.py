@@ -1,6 +1,6 @@
 """Object recognition on rendered camera frames: recognition rate, false detections, time per frame.
 
-The database is taught the pictures of the nine objects of ``drivers.sim.world.demo_world``
+The database is taught the pictures of the nine objects of ``sim.world.demo_world``
 (one picture each, as the demo does). Each object is then rendered alone in an empty
 10 m × 10 m room by the virtual camera (640 × 480, 60° field of view, 1 m high, pixel noise
 σ = 2, blur σ = 0.6) at distances 1–6 m and turned 0°, 30°, 45° and 60° away from facing the
@@ -30,12 +30,12 @@ from typing import Any
 import numpy as np
 
 from drivers.messages import Pose2D
-from drivers.sim.camera import CameraMount, VirtualCamera
-from drivers.sim.objects import WorldObject, object_texture
-from drivers.sim.world import SimWorld, demo_world
 from knowledge.fileio import atomic_write_text
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.objects import ObjectDatabase, ObjectRecogniser, extract_features
+from sim.camera_view import CameraMount, VirtualCamera
+from sim.objects import WorldObject, object_texture
+from sim.world import SimWorld, demo_world
 
 DISTANCES = (1.0, 2.0, 3.0, 4.0, 5.0, 6.0)
 TURNS = (0.0, 30.0, 45.0, 60.0)

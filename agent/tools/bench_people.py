@@ -63,9 +63,9 @@ def real_scans(data: Path, n: int) -> tuple[np.ndarray, float, float, float, flo
 
 def simulated_scans(n: int, seed: int = 0) -> tuple[np.ndarray, float, float, float, float, str]:
     """``n`` scans of three people walking in a 10 m room with a pillar (virtual LMS, 768 beams)."""
-    from drivers.sim.lms_world import LmsWorld
-    from drivers.sim.people import legs_of, walkers_in
     from knowledge.metric.grid import OccupancyGrid
+    from sim.lms_world import LmsWorld
+    from sim.people import legs_of, walkers_in
 
     occ = np.zeros((200, 200), dtype=bool)
     occ[:3] = occ[-3:] = True

@@ -56,10 +56,8 @@ from scipy.sparse.csgraph import dijkstra
 
 from drivers.messages import Pose2D
 from drivers.sim.base import BaseStatus, ControllerParams, OdometryNoise, SimBase
-from drivers.sim.world import SimWorld
 from knowledge.fileio import atomic_write_text
 from knowledge.metric.beams import beam_angles
-from knowledge.metric.buildings import DOOR_ID_BASE, Building, generate_building
 from knowledge.metric.local_map import LocalMap, LocalMapParams
 from knowledge.metric.raycast import cast
 from knowledge.metric.rear_beams import FullScanParams, assemble_scan, full_scan
@@ -67,6 +65,8 @@ from knowledge.navigation.doorways import Doorway, DoorwayDetector, scan_points
 from knowledge.navigation.graph import DOORWAY, GraphParams, NavigationGraph
 from knowledge.places.model import PlaceModel, default_model_path
 from knowledge.topology.areas import AreaMap
+from sim.buildings import DOOR_ID_BASE, Building, generate_building
+from sim.world import SimWorld
 
 SCAN_PERIOD = 0.1
 SIM_DT = 0.02

@@ -355,8 +355,8 @@ def replug_cycles(n: int = 30, *, away: float = 0.4, limit: float = 2.0, seed: i
     """Unplug the virtual LMS ``n`` times; seconds from each replug to the first new scan."""
     from drivers.sick.driver import LMS2xx
     from drivers.sim.lms import VirtualLMS
-    from drivers.sim.lms_world import LmsWorld
     from knowledge.metric.grid import OccupancyGrid
+    from sim.lms_world import LmsWorld
 
     occ = np.ones((42, 62), dtype=bool)
     occ[1:-1, 1:-1] = False

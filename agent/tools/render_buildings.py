@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from knowledge.fileio import encode_image, write_image
-from knowledge.metric.buildings import generate_building, generate_tour_office, label_building_png
+from sim.buildings import generate_building, generate_tour_office, label_building_png
 
 #: name → (seed, options); the seeds were picked for pictures that show each feature clearly.
 PICTURES: dict[str, tuple[int, dict[str, Any]]] = {

@@ -64,7 +64,7 @@ _BACKENDS: dict[str, str] = {
     "device": "drivers.camera.opencv:OpenCVCamera",
     "file": "drivers.camera.opencv:OpenCVCamera",
     "stream": "drivers.camera.opencv:OpenCVCamera",
-    "sim": "drivers.sim.camera:SimCameraSource",
+    "sim": "sim.camera_view:camera_source",
 }
 
 

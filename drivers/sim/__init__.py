@@ -1,7 +1,8 @@
-"""Simulated twins of the drivers: virtual LMS, base and camera over a simulated world."""
+"""Simulated twins of the devices: they speak the same bytes and APIs as the hardware.
 
-#: What a ``--world`` may name, for every simulator command (:func:`drivers.sim.world.load_world`).
-WORLD_HELP = (
-    "gen:SEED (a generated office), tour:SEED (a generated tour office), demo:SEED (the guided "
-    "tour's world), a map_server .yaml, or an image with --resolution"
-)
+:mod:`drivers.sim.lms` is a SICK LMS 2xx on a pseudo-terminal, :mod:`drivers.sim.base` a
+differential-drive base with odometry, :mod:`drivers.sim.camera` a camera source. What they
+sense comes from outside, through small protocols (:class:`~drivers.sim.lms.RangeSource`,
+:class:`~drivers.sim.base.Terrain`, :class:`~drivers.sim.camera.Renderer`): the simulated
+world that implements them is the :mod:`sim` package.
+"""

@@ -23,15 +23,28 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
 from drivers.messages import Pose2D, Twist2D
 from drivers.odometry import OdometrySource, arc_step, normalize_angle
-from drivers.sim.world import SimWorld
 from knowledge.errors import DeviceTimeout
+from knowledge.metric.grid import OccupancyGrid
 
 log = logging.getLogger(__name__)
+
+
+class Terrain(Protocol):
+    """What the base collides with (:class:`sim.world.SimWorld`): the walls' grid, and the
+    distance from points to the nearest wall."""
+
+    @property
+    def grid(self) -> OccupancyGrid: ...
+
+    def clearance(self, xy: np.ndarray) -> np.ndarray:
+        """Metres from world points ``(..., 2)`` to the nearest occupied cell (0 inside one)."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -145,7 +158,7 @@ class SimBase:
 
     def __init__(
         self,
-        world: SimWorld | None,
+        world: Terrain | None,
         start: Pose2D,
         *,
         radius: float = 0.2,

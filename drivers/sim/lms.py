@@ -50,6 +50,7 @@ import tty
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
@@ -72,7 +73,17 @@ from drivers.sick.constants import (
     Reply,
     Units,
 )
-from drivers.sim.lms_world import LmsWorld
+
+
+class RangeSource(Protocol):
+    """What the virtual scanner measures: the ranges of a scan taken at time ``t`` (seconds
+    since the scanner started), ``max_range`` where a beam hits nothing
+    (:class:`sim.lms_world.LmsWorld` sees a simulated world with walking people)."""
+
+    def ranges(self, t: float, *, n_beams: int, fov: float, max_range: float) -> np.ndarray:
+        """``(n_beams,)`` float32 metres over ``fov`` radians centred on the sensor's heading."""
+        ...
+
 
 log = logging.getLogger(__name__)
 
@@ -161,7 +172,7 @@ class VirtualLMS:
 
     def __init__(
         self,
-        world: LmsWorld,
+        world: RangeSource,
         *,
         link: str | Path | None = None,
         rate: float | None = None,

@@ -15,14 +15,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from scipy import ndimage
 
-from drivers.sim import WORLD_HELP
-from drivers.sim.objects import WorldObject
 from knowledge.errors import MapError
 from knowledge.metric.grid import OccupancyGrid
+from sim import WORLD_HELP
+from sim.objects import WorldObject
 
 if TYPE_CHECKING:
-    from drivers.sim.tour import TourWorld
-    from knowledge.metric.buildings_model import Building
+    from sim.buildings_model import Building
+    from sim.tour import TourWorld
 
 #: Ray marching samples a ray every this fraction of a cell.
 _MARCH_STEP_CELLS = 1.0 / 3.0
@@ -220,7 +220,7 @@ def load_tour(spec: str | None) -> TourWorld | None:
     """
     if not spec or not spec.startswith("demo:"):
         return None
-    from drivers.sim.tour import tour_world
+    from sim.tour import tour_world
 
     try:
         seed = int(spec[len("demo:") :])
@@ -238,7 +238,7 @@ def load_world(spec: str | None, resolution: float | None = None) -> tuple[Occup
     Raises:
         MapError: a malformed seed, or no such map file.
     """
-    from knowledge.metric.buildings import generate_building, generate_tour_office
+    from sim.buildings import generate_building, generate_tour_office
 
     spec = spec or "gen:0"
     tour = load_tour(spec)

@@ -239,9 +239,9 @@ def default_sensor_pose(grid: OccupancyGrid, clearance: float = 0.3) -> Pose:
 
 
 def load_world_grid(spec: str | None, resolution: float | None = None) -> OccupancyGrid:
-    """The grid named by a ``--world`` argument (:func:`drivers.sim.world.load_world`: the same
+    """The grid named by a ``--world`` argument (:func:`sim.world.load_world`: the same
     syntax as every simulator command)."""
-    from drivers.sim.world import load_world
+    from sim.world import load_world
 
     return load_world(spec, resolution)[0]
 

@@ -34,8 +34,8 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from knowledge.errors import MapError
-from knowledge.metric.buildings import DOOR_ID_BASE, Building, Door
 from knowledge.metric.grid import OccupancyGrid
+from sim.buildings import DOOR_ID_BASE, Building, Door
 
 Point = tuple[float, float]
 XY = Sequence[float] | np.ndarray
@@ -168,7 +168,7 @@ class RoutePlanner:
         grid: the map; only free cells are driven on.
         doors: doors to cross along their normals (those of a generated building).
         spaces: ``(rows, cols)`` space ids of the grid's cells (door openings carry door ids
-            ``>= DOOR_ID_BASE``), as :class:`~knowledge.metric.buildings.Building` has them;
+            ``>= DOOR_ID_BASE``), as :class:`~sim.buildings.Building` has them;
             needed for door crossings and tours.
         params: see :class:`RouteParams`.
     """

@@ -2,7 +2,7 @@
 
 A :class:`WorldObject` is a flat, vertical, textured rectangle standing in the world — a
 picture of a couch, a television, a bookcase — seen by the virtual camera
-(:mod:`drivers.sim.camera`). Its texture is drawn here with OpenCV from a seed derived from
+(:mod:`sim.camera_view`). Its texture is drawn here with OpenCV from a seed derived from
 the object's name and kind: shapes, gradients, patterns, text and a little noise, so that
 SIFT finds many distinctive keypoints and two objects are not confused. Nothing is
 downloaded; the same name always gives the same picture.

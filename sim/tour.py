@@ -38,9 +38,9 @@ around from (:attr:`TourWorld.view_pose`: the couch and the television are both 
 there).
 
 :class:`TourWorld` also carries the ground truth: the areas (rectangles with their class
-and name), the real and the false doorway, and a :class:`~knowledge.metric.buildings.Building`
+and name), the real and the false doorway, and a :class:`~sim.buildings.Building`
 record (labels, spaces, doors, furniture) so that the route planner, the pictures of
-:mod:`knowledge.metric.buildings_picture` and the simulated robot's ground truth work on
+:mod:`sim.buildings_picture` and the simulated robot's ground truth work on
 it as on a generated office.
 """
 
@@ -53,12 +53,12 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers.sim.objects import WorldObject
-from drivers.sim.world import SimWorld
 from knowledge.labels import CLASS_NAMES, CORRIDOR, DOORWAY, ROOM
-from knowledge.metric.buildings_doors import DOOR_ID_BASE
-from knowledge.metric.buildings_model import Building, Door, Furniture, Room, WorldRect
 from knowledge.metric.grid import OccupancyGrid
+from sim.buildings_doors import DOOR_ID_BASE
+from sim.buildings_model import Building, Door, Furniture, Room, WorldRect
+from sim.objects import WorldObject
+from sim.world import SimWorld
 
 __all__ = ["AreaTruth", "DoorwayTruth", "TourLeg", "TourWorld", "tour_world"]
 
@@ -184,7 +184,7 @@ class TourWorld:
         return self.building.grid
 
     def world(self) -> SimWorld:
-        """The grid and the objects, for the camera (:class:`~drivers.sim.camera.VirtualCamera`)."""
+        """The grid and the objects, for the camera (:class:`~sim.camera_view.VirtualCamera`)."""
         return SimWorld(self.grid, self.objects)
 
     def leg(self, name: str) -> TourLeg:

@@ -22,8 +22,8 @@ At the end of its path a person turns around (``mode="pingpong"``), walks back t
 waypoint (``"loop"``) or stops and stands with its legs together (``"stop"``). A person with
 ``speed = 0`` stands at the first waypoint facing the second (or +x).
 
-:meth:`SimPerson.legs` gives two :class:`~drivers.sim.lms_world.Leg` whose centres are
-functions of time — exactly what :class:`~drivers.sim.lms_world.LmsWorld` takes::
+:meth:`SimPerson.legs` gives two :class:`~sim.lms_world.Leg` whose centres are
+functions of time — exactly what :class:`~sim.lms_world.LmsWorld` takes::
 
     world = LmsWorld(grid, pose, legs=legs_of(people))
 """
@@ -38,8 +38,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from drivers.sim.lms_world import LEG_RADIUS, Leg
 from knowledge.metric.grid import OccupancyGrid
+from sim.lms_world import LEG_RADIUS, Leg
 
 Point = tuple[float, float]
 MODES = ("pingpong", "loop", "stop")
@@ -211,7 +211,7 @@ class SimPerson:
         return out
 
     def legs(self) -> tuple[Leg, Leg]:
-        """The two legs as moving circles for :class:`~drivers.sim.lms_world.LmsWorld`."""
+        """The two legs as moving circles for :class:`~sim.lms_world.LmsWorld`."""
 
         def leg(k: int) -> Leg:
             def pos(t: float) -> Point:

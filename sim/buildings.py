@@ -15,7 +15,7 @@ Conventions
   occupied (``outside="occupied"``, as in the IPA labelled maps).
 * ``labels``: :mod:`knowledge.labels` codes, ROOM, CORRIDOR, HALLWAY (open halls) and
   DOORWAY on every free cell, 0 elsewhere. Doorways are painted as in the IPA labelled maps:
-  a rectangle across the opening (see :mod:`knowledge.metric.buildings_doors`).
+  a rectangle across the opening (see :mod:`sim.buildings_doors`).
 * ``spaces``: the id of the room, corridor or hall each free cell belongs to, 0 on occupied
   and outside cells. The cells *inside a door opening* (within the wall thickness) carry the
   door's id, ``>= DOOR_ID_BASE`` (10000); the doorway label's overhang into the rooms keeps
@@ -24,7 +24,7 @@ Conventions
 * Space ids run 1, 2, ... over corridors, then halls, then rooms. A corridor is one space
   per connected corridor (a ring is one space); a hall splitting corridors makes several.
 * Tables and desks occupy only their legs in the grid (see
-  :mod:`knowledge.metric.buildings_furniture`); the :class:`Furniture` records keep their
+  :mod:`sim.buildings_furniture`); the :class:`Furniture` records keep their
   full size for a simulator's collision model.
 
 No imperfections are added: the real labelled maps this data is compared against are clean
@@ -41,8 +41,9 @@ import cv2
 import numpy as np
 
 from knowledge.labels import CORRIDOR, DOORWAY, HALLWAY, ROOM
-from knowledge.metric.buildings_doors import DOOR_ID_BASE, DOOR_MAX_WIDTH, DOOR_MIN_WIDTH, DoorCut, DoorPlacer
-from knowledge.metric.buildings_furniture import (
+from knowledge.metric.grid import OccupancyGrid
+from sim.buildings_doors import DOOR_ID_BASE, DOOR_MAX_WIDTH, DOOR_MIN_WIDTH, DoorCut, DoorPlacer
+from sim.buildings_furniture import (
     SHAPES,
     Furnisher,
     Item,
@@ -50,7 +51,7 @@ from knowledge.metric.buildings_furniture import (
     furnish_building,
     living_room_candidates,
 )
-from knowledge.metric.buildings_layout import (
+from sim.buildings_layout import (
     CORRIDOR_MAX_WIDTH,
     CORRIDOR_MIN_WIDTH,
     LAYOUTS,
@@ -60,9 +61,8 @@ from knowledge.metric.buildings_layout import (
     partition_strip,
     sample_dims,
 )
-from knowledge.metric.buildings_model import Building, Door, Furniture, Room, WorldRect
-from knowledge.metric.buildings_picture import label_building_png
-from knowledge.metric.grid import OccupancyGrid
+from sim.buildings_model import Building, Door, Furniture, Room, WorldRect
+from sim.buildings_picture import label_building_png
 
 __all__ = [
     "DOOR_ID_BASE",

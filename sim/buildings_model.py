@@ -2,7 +2,7 @@
 
 Coordinates are world metres in the grid's frame (x right, y up, origin at the lower-left
 corner of the map); arrays are ``(rows, cols)`` in image orientation. See
-:mod:`knowledge.metric.buildings` for how they are made.
+:mod:`sim.buildings` for how they are made.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The tutor of the guided tour: a simulated person who walks on command, and the lines it says.
 
-:class:`Tutor` is a person with two legs and the gait of :class:`~drivers.sim.people.SimPerson`
+:class:`Tutor` is a person with two legs and the gait of :class:`~sim.people.SimPerson`
 (what a laser at knee height sees: two circles of about 6 cm radius). It stands until told
 to :meth:`Tutor.walk` a list of waypoints, walks them at ``speed`` (0.6 m/s by default, a
 slow guiding pace), then stops and stands, facing the way it walked. A tutor who looks back
@@ -9,13 +9,13 @@ waits for the robot: while the robot is farther than ``wait_distance`` metres it
 
 The tutor moves when :meth:`Tutor.advance` is called with the simulation time (seconds) and
 the robot's position; :meth:`Tutor.attach` does that on every step of a
-:class:`~drivers.sim.robot.SimRobot` and puts the tutor's legs into the robot's lasers (the
+:class:`~sim.robot.SimRobot` and puts the tutor's legs into the robot's lasers (the
 360° scans and the LMS on the pseudo-terminal). The legs are where the tutor is after the
 last :meth:`advance`; the time the laser asks for is not used.
 
 :data:`SCRIPT` is the story of the book's Sect. 7.4 as data: per step what the tutor says,
 the intent the dialogue should understand, words the robot's reply must contain, the robot's
-question the tutor answers, and the legs of :class:`~drivers.sim.tour.TourWorld` the tutor
+question the tutor answers, and the legs of :class:`~sim.tour.TourWorld` the tutor
 walks afterwards. The demo plays it; tests check the replies against ``expect``.
 
 Units: metres, radians, seconds; positions in the map frame of the world the tutor is in.
@@ -31,11 +31,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from drivers.sim.lms_world import Leg
-from drivers.sim.people import Gait, SimPerson
+from sim.lms_world import Leg
+from sim.people import Gait, SimPerson
 
 if TYPE_CHECKING:
-    from drivers.sim.robot import RobotSample, SimRobot
+    from sim.robot import RobotSample, SimRobot
 
 __all__ = ["SCRIPT", "ScriptLine", "Tutor", "script_step"]
 
@@ -106,7 +106,7 @@ class Tutor:
         position: where the tutor stands, ``(x, y)`` metres.
         heading: the way it faces, radians.
         speed: walking speed, m/s.
-        gait: the legs' gait (default :class:`~drivers.sim.people.Gait`).
+        gait: the legs' gait (default :class:`~sim.people.Gait`).
         wait_distance: metres; the tutor stops while the robot is farther away than this
             (None: it never waits).
         resume_distance: metres; a waiting tutor walks on once the robot is this near.
@@ -277,7 +277,7 @@ class Tutor:
             return np.array([[x + half * nx, y + half * ny], [x - half * nx, y - half * ny]])
 
     def legs(self) -> tuple[Leg, Leg]:
-        """The two legs as :class:`~drivers.sim.lms_world.Leg` circles (positions: now)."""
+        """The two legs as :class:`~sim.lms_world.Leg` circles (positions: now)."""
 
         def leg(k: int) -> Leg:
             def pos(_t: float) -> Point:

@@ -11,10 +11,10 @@ One world — a generated office (``gen:SEED``, ``tour:SEED``) or a map file —
   to listeners as :class:`~drivers.messages.LaserScan` (no LMS 2xx sweeps 360°, so there is
   no serial line to emulate);
 * optional walking people (their legs show in the scans) and an optional
-  :class:`~drivers.sim.camera.VirtualCamera` rendering JPEG frames from the true pose, with
+  :class:`~sim.camera_view.VirtualCamera` rendering JPEG frames from the true pose, with
   the building's furniture as pictures;
 * what the base does: follow a scripted route (given waypoints, or a tour of the building's
-  rooms through their doors, :mod:`drivers.sim.route`), a velocity command, or a goal (a
+  rooms through their doors, :mod:`sim.route`), a velocity command, or a goal (a
   pose or a path, in the odometry or the map frame; planned around walls unless told not).
 
 Every step the listeners get a :class:`RobotSample` (odometry in frame ``"odom"``, the true
@@ -53,18 +53,18 @@ import numpy as np
 
 from drivers.messages import CameraFrame, LaserScan, Pose2D, Twist2D
 from drivers.sim.base import BaseStatus, ControllerParams, OdometryNoise, SimBase
-from drivers.sim.camera import VirtualCamera
 from drivers.sim.lms import VirtualLMS
-from drivers.sim.lms_world import Leg, LmsWorld, default_sensor_pose, ray_circle_ranges
-from drivers.sim.objects import WorldObject
-from drivers.sim.people import SimPerson, walkers_in
-from drivers.sim.route import Route, RoutePlanner, building_tour, corridor_start, resample, split_at_turns
-from drivers.sim.world import SimWorld, load_tour, load_world
 from knowledge.errors import ConfigError, MapError
 from knowledge.labels import CLASS_NAMES
 from knowledge.metric.beams import beam_angles
-from knowledge.metric.buildings import Building
 from knowledge.metric.raycast import cast
+from sim.buildings import Building
+from sim.camera_view import VirtualCamera
+from sim.lms_world import Leg, LmsWorld, default_sensor_pose, ray_circle_ranges
+from sim.objects import WorldObject
+from sim.people import SimPerson, walkers_in
+from sim.route import Route, RoutePlanner, building_tour, corridor_start, resample, split_at_turns
+from sim.world import SimWorld, load_tour, load_world
 
 if TYPE_CHECKING:
     pass
@@ -81,7 +81,7 @@ MAX_ROUTE_COLLISIONS = 20
 GOAL_SLACK_S = 30.0
 #: Metres a planned goal's waypoint may be moved to keep clear of obstacles.
 SNAP_DISTANCE = 0.5
-#: Furniture kinds shown to the camera, as catalogue kinds of :mod:`drivers.sim.objects`.
+#: Furniture kinds shown to the camera, as catalogue kinds of :mod:`sim.objects`.
 _PICTURE_KIND = {
     "couch": "couch",
     "tv": "television",
@@ -120,7 +120,7 @@ class SimRobotConfig:
 
     Attributes:
         world: ``gen:SEED`` (a generated office), ``tour:SEED`` (a generated tour office),
-            ``demo:SEED`` (the guided tour's office of :mod:`drivers.sim.tour`, with its
+            ``demo:SEED`` (the guided tour's office of :mod:`sim.tour`, with its
             objects for the camera, starting at the charging station), a map_server
             ``.yaml`` or an image (with ``resolution`` metres per cell).
         start: the true start pose ``(x, y, heading)`` in metres and radians; None: the first
@@ -334,8 +334,9 @@ class SimRobot:
         self._sensor = cfg.mount.apply(start)
         self._truth = self.base.true_pose
         self.lms: VirtualLMS | None = None
+        self._lms_world: LmsWorld | None = None
         if cfg.laser == "front":
-            lms_world = LmsWorld(
+            lms_world = self._lms_world = LmsWorld(
                 self.grid, lambda t: self._sensor, self.legs, noise_std=cfg.noise, seed=cfg.seed
             )
             angle, res = cfg.lms_variant
@@ -485,9 +486,9 @@ class SimRobot:
         Call before :meth:`start` or from the robot's thread: the lists are not locked.
         """
         self.legs.extend(legs)
-        if self.lms is not None:
+        if self._lms_world is not None:
             # the LMS's world keeps its own tuple of legs
-            self.lms.world.legs = tuple(self.legs)
+            self._lms_world.legs = tuple(self.legs)
         if on_step is not None:
             self.sample_listeners.append(on_step)
 

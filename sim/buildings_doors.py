@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from knowledge.metric.buildings_layout import Dims, Rect
+from sim.buildings_layout import Dims, Rect
 
 #: Door widths (metres).
 DOOR_MIN_WIDTH = 0.8

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from knowledge.metric.buildings_layout import Dims, Rect
+from sim.buildings_layout import Dims, Rect
 
 #: How each kind is drawn in the grid: "solid", "legs" or "disk".
 SHAPES: dict[str, str] = {

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 
 from knowledge.labels import overlay
-from knowledge.metric.buildings_model import Building, Furniture
+from sim.buildings_model import Building, Furniture
 
 
 def label_building_png(

@@ -31,7 +31,7 @@ an area by a name, a type or the class, optionally "with" objects → a node of 
 (:func:`~knowledge.navigation.planning.goal_in_area`), the nearest by path when several fit.
 
 After every change of the map (:meth:`DialogueAgent.tick`), false doorways
-(:func:`~knowledge.navigation.consistency.false_doorways`) are looked for; a new one is
+(:func:`~knowledge.topology.consistency.false_doorways`) are looked for; a new one is
 asked about ("Was there a door here?", choices yes/no, ``about`` = the finding). "no"
 removes the doorway node (the areas are recomputed, their events go to the concepts);
 "yes" keeps it and it is never asked about again.
@@ -60,7 +60,6 @@ from agent.dialogue.referring import with_article as _with_article
 from agent.dialogue_memory import AREA_CLASSES, MemoryConcepts, class_of_words
 from agent.ratelog import RateLimitedLog
 from knowledge.errors import LociError
-from knowledge.navigation.consistency import FalseDoorway, false_doorways, remove_doorway
 from knowledge.navigation.graph import PLACE, NavigationGraph
 from knowledge.navigation.planning import goal_in_area, plan, start_node
 from knowledge.topology.areas import (
@@ -68,6 +67,7 @@ from knowledge.topology.areas import (
     AreaMap,
     AreasMerged,
 )
+from knowledge.topology.consistency import FalseDoorway, false_doorways, remove_doorway
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")

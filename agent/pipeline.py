@@ -36,7 +36,7 @@ The result depends only on the sequence of ``(scan, pose)`` inputs (and the mode
 parameters): a live run and a replay of its recording build the same graph.
 
 Documents: :meth:`Pipeline.state_document` is the persisted ``loci.navgraph/1`` document
-(:mod:`knowledge.navigation.persistence`, graph and areas with votes and ids);
+(:mod:`knowledge.topology.persistence`, graph and areas with votes and ids);
 :func:`graph_message` and :func:`areas_message` turn such a document into the slim
 ``loci.graph/1`` and ``loci.areas/1`` messages the bus carries; :func:`place_message` is
 the ``loci.place/1`` message of one step. :meth:`Pipeline.from_state` resumes from a
@@ -57,7 +57,6 @@ from agent.config import AgentConfig, build_dataclass, dataclass_table
 from drivers.messages import LaserScan, Pose2D
 from knowledge.metric.local_map import LocalMap, LocalMapParams, beam_endpoints
 from knowledge.metric.rear_beams import FullScanParams, assemble_scan
-from knowledge.navigation import persistence
 from knowledge.navigation.doorways import Doorway, DoorwayDetector, DoorwayParams, scan_points
 from knowledge.navigation.graph import DOORWAY, GraphParams, GraphUpdate, NavigationGraph
 from knowledge.people.detector import LegDetector
@@ -65,6 +64,7 @@ from knowledge.people.masking import fill_masked, person_beams, tracked_legs, un
 from knowledge.people.pipeline import PeopleFrame, PeoplePipeline
 from knowledge.people.static import StaticCells
 from knowledge.places.model import PlaceModel
+from knowledge.topology import persistence
 from knowledge.topology.areas import AreaEvent, AreaMap
 
 __all__ = [

@@ -102,9 +102,9 @@ from drivers.camera.jpeg import decode_image
 from drivers.messages import LaserScan, Pose2D
 from knowledge.errors import ConfigError, DataError, ProtocolError
 from knowledge.fileio import atomic_write_text
-from knowledge.navigation import persistence
 from knowledge.people.detector import LegDetector
 from knowledge.places.model import PlaceModel
+from knowledge.topology import persistence
 from knowledge.topology.areas import AreaCreated
 
 log = logging.getLogger(__name__)

@@ -13,10 +13,10 @@ from collections.abc import Sequence
 import numpy as np
 import pytest
 
-from knowledge.navigation.consistency import false_doorways, remove_doorway, side_offset
 from knowledge.navigation.doorways import Doorway
 from knowledge.navigation.graph import DOORWAY, PLACE, GraphParams, NavigationGraph
 from knowledge.topology.areas import AreaMap, AreaRemoved, AreasMerged
+from knowledge.topology.consistency import false_doorways, remove_doorway, side_offset
 
 Point = tuple[float, float]
 

@@ -155,7 +155,7 @@ def test_the_recording_replays_to_the_same_areas(tour_run: Any, tmp_path: Path) 
         timeout=300,
     )
     assert proc.returncode == 0, proc.stderr
-    from knowledge.navigation import persistence
+    from knowledge.topology import persistence
 
     # the replay made the tutor's correction again from the recorded map edit, by itself
     assert "1 map edits made again" in proc.stdout, proc.stdout

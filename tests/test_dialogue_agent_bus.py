@@ -25,9 +25,9 @@ from agent.bus.session import BusConfig, bus_session, listening_endpoints
 from agent.bus.testing import settle
 from agent.config import load_config
 from agent.runtime import Agent
-from knowledge.navigation import persistence
 from knowledge.navigation.graph import DOORWAY, PLACE, GraphParams, NavigationGraph
 from knowledge.places.model import PlaceModel, default_model_path
+from knowledge.topology import persistence
 from knowledge.topology.areas import AreaMap
 
 ROBOT = "talkbot"

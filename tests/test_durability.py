@@ -28,8 +28,8 @@ import zenoh
 from agent.bus.bridge import publish_stream
 from agent.bus.session import BusConfig, bus_session, listening_endpoints
 from knowledge.conceptual import ConceptualMap
-from knowledge.navigation import persistence
 from knowledge.navigation.graph import DOORWAY, PLACE, GraphParams, NavigationGraph
+from knowledge.topology import persistence
 from knowledge.topology.areas import AreaMap
 
 REPO = Path(__file__).resolve().parent.parent

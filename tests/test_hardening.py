@@ -37,9 +37,9 @@ from agent.bus.testing import settle
 from agent.config import load_config
 from agent.runtime import Agent
 from drivers.messages import CameraFrame
-from knowledge.navigation import persistence
 from knowledge.navigation.graph import DOORWAY, PLACE, GraphParams, NavigationGraph
 from knowledge.places.model import PlaceModel, default_model_path
+from knowledge.topology import persistence
 from knowledge.topology.areas import AreaMap
 
 ROBOT = "hardbot"

@@ -14,9 +14,9 @@ import pytest
 from agent.mapviz import LayeredMap, area_caption, class_colour, render_layered_map
 from agent.pipeline import areas_message, graph_message
 from knowledge.labels import CLASS_COLORS_BGR, CORRIDOR, DOORWAY, ROOM
-from knowledge.navigation import persistence
 from knowledge.navigation.graph import DOORWAY as DOORWAY_KIND
 from knowledge.navigation.graph import PLACE, NavigationGraph
+from knowledge.topology import persistence
 from knowledge.topology.areas import AreaMap
 from sim.tour import TourWorld, tour_world
 

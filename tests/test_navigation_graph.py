@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from knowledge.errors import ProtocolError
-from knowledge.navigation import persistence
 from knowledge.navigation.doorways import Doorway
 from knowledge.navigation.graph import DOORWAY, PLACE, GraphParams, NavigationGraph
+from knowledge.topology import persistence
 from knowledge.topology.areas import AreaMap
 
 

@@ -28,9 +28,9 @@ from agent.pipeline import (
 )
 from drivers.messages import LaserScan, Pose2D
 from knowledge.metric.raycast import cast
-from knowledge.navigation import persistence
 from knowledge.navigation.graph import GraphParams
 from knowledge.places.model import PlaceModel, default_model_path
+from knowledge.topology import persistence
 from sim.buildings import Building, Door, generate_building
 
 STEP = 0.05  # metres between scans

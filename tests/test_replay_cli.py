@@ -31,9 +31,9 @@ from agent.recording.recorder import McapSink, recording_metadata
 from agent.recording.replay import McapMessages
 from drivers.messages import LaserScan, Pose2D
 from knowledge.metric.raycast import cast
-from knowledge.navigation import persistence
 from knowledge.navigation.graph import GraphParams
 from knowledge.places.model import PlaceModel, default_model_path
+from knowledge.topology import persistence
 from sim.buildings import generate_building
 
 REPO = Path(__file__).resolve().parent.parent

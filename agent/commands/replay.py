@@ -469,8 +469,8 @@ def _edit_order(edit: dict[str, Any]) -> tuple[float, float]:
 
 def _apply_edit(pipeline: Any, edit: dict[str, Any]) -> bool:
     """Make one ``loci.map_edit/1`` on the pipeline's map; False when it does not apply."""
-    from knowledge.navigation.consistency import remove_doorway
     from knowledge.navigation.graph import PLACE
+    from knowledge.topology.consistency import remove_doorway
 
     node = edit["node"]
     if edit["op"] == "remove_doorway" and node in pipeline.graph and pipeline.graph.node(node).kind != PLACE:
@@ -488,8 +488,8 @@ def _replay(args: argparse.Namespace) -> int:
     from agent.progress import Progress
     from knowledge.fileio import atomic_write_text
     from knowledge.metric.mapping import ScanMapper
-    from knowledge.navigation import persistence
     from knowledge.places.model import PlaceModel
+    from knowledge.topology import persistence
 
     config = load_config(args.config, env={}) if args.config else None
     params = PipelineParams.from_config(config) if config is not None else None

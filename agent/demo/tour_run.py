@@ -424,7 +424,7 @@ def replay_check(
     import subprocess
 
     from agent.pipeline import areas_message
-    from knowledge.navigation import persistence
+    from knowledge.topology import persistence
 
     shutil.rmtree(out_dir, ignore_errors=True)
     t0 = time.monotonic()

@@ -42,8 +42,8 @@ from typing import Any, TypeVar
 
 from agent.bus.keys import robot_name
 from agent.bus.session import DEFAULT_AGENT_ENDPOINT, BusConfig
+from agent.core.odom_sync import SyncParams
 from agent.live.config import FoxgloveConfig
-from agent.odom_sync import SyncParams
 from agent.ros2.config import Ros2Config
 from knowledge.errors import ConfigError
 from knowledge.metric.local_map import LocalMapParams
@@ -186,7 +186,7 @@ class OdometryConfig(SyncParams):
     """``[odometry]``: how each scan gets the robot's pose at its stamp.
 
     ``source`` is ``"bus"``: subscribe ``loci/<robot>/odom`` (the only source so far). The
-    other keys are :class:`~agent.odom_sync.SyncParams` (``max_wait``, ``max_gap``,
+    other keys are :class:`~agent.core.odom_sync.SyncParams` (``max_wait``, ``max_gap``,
     ``still``, ``max_extrapolation``, ``max_future``, ``reorder``, ``horizon``,
     ``max_pending``): how long a scan waits for odometry, across which gaps it is
     interpolated, how far it may be extrapolated, how far ahead a stamp may be, and how long

@@ -25,8 +25,8 @@ Tasks (one event loop, one thread for the core): the **laser** task (driver or b
 **odometry** task (bus), the **housekeeping** task (every 50 ms: expire scans that waited
 too long for odometry, save the state when it changed and ``state.save_interval`` passed),
 the **diagnostics** task (every ``diagnostics.period``) and the **recorder** task. Both
-sensor tasks feed one :class:`~agent.odom_sync.OdomSync`; each scan it releases is
-processed at once, synchronously (about 1 ms), by the :class:`~agent.pipeline.Pipeline`, in
+sensor tasks feed one :class:`~agent.core.odom_sync.OdomSync`; each scan it releases is
+processed at once, synchronously (about 1 ms), by the :class:`~agent.core.pipeline.Pipeline`, in
 stamp order. Before a scan enters the sync, the odometry already queued is taken first, so
 arrival order is kept across the two streams.
 
@@ -90,11 +90,11 @@ from agent.bus.queryable import StateCell, StateQueryable
 from agent.bus.scene import areas_scene, graph_scene, people_scene
 from agent.bus.session import close_session, listening_endpoints, open_session
 from agent.config import AgentConfig
-from agent.dialogue_agent import DialogueAgent, Outgoing
-from agent.dialogue_memory import MemoryConcepts
-from agent.dialogue_task import run_dialogue
-from agent.odom_sync import Matched, OdomSync
-from agent.pipeline import Pipeline, PipelineParams, StepResult, place_message
+from agent.conversation.agent import DialogueAgent, Outgoing
+from agent.conversation.memory import MemoryConcepts
+from agent.conversation.task import run_dialogue
+from agent.core.odom_sync import Matched, OdomSync
+from agent.core.pipeline import Pipeline, PipelineParams, StepResult, place_message
 from agent.ratelog import RateLimitedLog
 from agent.recording.recorder import McapSink, Recorder, recording_metadata
 from agent.supervisor import Restarts, supervise
@@ -173,8 +173,8 @@ class AgentReport:
 
     ``drops`` holds the scans (or samples) not processed, by named reason: ``driver`` (the
     LMS driver's queue), ``scan_queue``, ``odom_queue`` (bus subscriptions), and every reason
-    of :data:`~agent.odom_sync.DROP_REASONS` (``no_odometry``, ``odom_gap``, ``late``,
-    ``future_stamp``, ...); ``sync`` has all of :class:`~agent.odom_sync.OdomSync`'s counters.
+    of :data:`~agent.core.odom_sync.DROP_REASONS` (``no_odometry``, ``odom_gap``, ``late``,
+    ``future_stamp``, ...); ``sync`` has all of :class:`~agent.core.odom_sync.OdomSync`'s counters.
     """
 
     robot: str
@@ -701,16 +701,18 @@ class Agent:
         return recogniser
 
     def _follow_factory(self) -> Callable[[], Any] | None:
-        """Makes follow-me controllers with ``[follow]``'s parameters (None: agent.follow is missing)."""
+        """Makes follow-me controllers with ``[follow]``'s parameters (None: agent.core.follow is missing)."""
         try:
-            from agent.follow import FollowMe, FollowParams
+            from agent.core.follow import FollowMe, FollowParams
         except ImportError:
             return None
         fc = self.config.follow
         try:
             params = FollowParams(distance=fc.distance, lost_after=fc.lost_after)
         except TypeError:
-            log.warning("agent.follow.FollowParams does not take distance/lost_after; using its defaults")
+            log.warning(
+                "agent.core.follow.FollowParams does not take distance/lost_after; using its defaults"
+            )
             params = None
         return lambda: FollowMe(params)
 

@@ -12,7 +12,7 @@ import pytest
 
 from agent.bus.session import DEFAULT_AGENT_ENDPOINT
 from agent.config import ENV_VARS, AgentConfig, load_config
-from agent.pipeline import PipelineParams
+from agent.core.pipeline import PipelineParams
 from knowledge.errors import ConfigError
 
 REPO = Path(__file__).resolve().parent.parent

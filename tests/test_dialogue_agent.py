@@ -19,8 +19,8 @@ import pytest
 from test_consistency import drive
 
 from agent.bus.schemas import SCHEMAS
-from agent.dialogue_agent import DialogueAgent, Outgoing
-from agent.dialogue_memory import MemoryConcepts
+from agent.conversation.agent import DialogueAgent, Outgoing
+from agent.conversation.memory import MemoryConcepts
 from knowledge.navigation.graph import DOORWAY, PLACE, GraphParams, NavigationGraph
 from knowledge.navigation.planning import plan
 from knowledge.topology.areas import AreaCreated, AreaMap, AreasMerged
@@ -329,7 +329,7 @@ def test_stop_cancels_the_goal() -> None:
 
 
 def test_follow_me_starts_follow_me_and_stop_ends_it() -> None:
-    pytest.importorskip("agent.follow", reason="follow-me (agent/follow.py) is not there yet")
+    pytest.importorskip("agent.core.follow", reason="follow-me (agent/core/follow.py) is not there yet")
     world, corridor, _, _ = office()
     agent, _ = agent_for(world)
     world.graph.current = corridor[0]
@@ -341,7 +341,7 @@ def test_follow_me_starts_follow_me_and_stop_ends_it() -> None:
 
 def test_follow_me_follows_the_pipelines_people_and_is_refused_without_them() -> None:
     """The people come with each scan (the pipeline's frame); follow-me makes goals from them."""
-    pytest.importorskip("agent.follow", reason="follow-me (agent/follow.py) is not there yet")
+    pytest.importorskip("agent.core.follow", reason="follow-me (agent/core/follow.py) is not there yet")
     from knowledge.people.detector import LegDetector
     from knowledge.people.pairing import pair_legs
     from knowledge.people.pipeline import PeopleFrame

@@ -11,7 +11,7 @@ from test_dialogue_agent import Clock, office
 
 from agent.bus.schemas import SCHEMAS
 from agent.conceptual_service import ConceptualService
-from agent.dialogue_agent import DialogueAgent
+from agent.conversation.agent import DialogueAgent
 from knowledge.topology.areas import AreaCreated
 
 

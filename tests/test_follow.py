@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.follow import (
+from agent.core.follow import (
     LOST_MESSAGE,
     NOBODY_MESSAGE,
     FollowMe,

@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 
 from agent.bus.codecs import decode_laser_scan, decode_pose
-from agent.commands.replay import read_recording_metadata
-from agent.pipeline import PipelineParams
+from agent.core.pipeline import PipelineParams
 from agent.recording.carmen import (
     CarmenConverter,
     CarmenOptions,
@@ -29,6 +28,7 @@ from agent.recording.carmen import (
 )
 from agent.recording.imported import ODOM, SCAN, TRUTH, Skip
 from agent.recording.importer import ImportResult, import_log
+from agent.recording.offline import read_recording_metadata
 from agent.recording.replay import McapMessages
 from drivers.messages import LaserScan, Pose2D
 from knowledge.errors import DataError

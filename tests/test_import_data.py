@@ -13,10 +13,10 @@ from pathlib import Path
 
 import pytest
 
-from agent.commands.replay import replay_recording
 from agent.recording.carmen import CarmenOptions
 from agent.recording.imported import ODOM, SCAN, TRUTH
 from agent.recording.importer import import_log
+from agent.recording.offline import replay_recording
 
 pytestmark = pytest.mark.data
 

@@ -18,10 +18,10 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from agent.bus.codecs import decode_laser_scan, decode_pose
-from agent.commands.replay import read_recording_metadata
-from agent.pipeline import PipelineParams
+from agent.core.pipeline import PipelineParams
 from agent.recording.imported import ODOM, SCAN
 from agent.recording.importer import detect_format, import_log
+from agent.recording.offline import read_recording_metadata
 from agent.recording.replay import McapMessages
 from agent.recording.rosbag import choose_topics
 from knowledge.errors import ConfigError, DataError

@@ -11,8 +11,8 @@ import cv2
 import numpy as np
 import pytest
 
-from agent.mapviz import LayeredMap, area_caption, class_colour, render_layered_map
-from agent.pipeline import areas_message, graph_message
+from agent.core.mapviz import LayeredMap, area_caption, class_colour, render_layered_map
+from agent.core.pipeline import areas_message, graph_message
 from knowledge.labels import CLASS_COLORS_BGR, CORRIDOR, DOORWAY, ROOM
 from knowledge.navigation.graph import DOORWAY as DOORWAY_KIND
 from knowledge.navigation.graph import PLACE, NavigationGraph
@@ -28,7 +28,7 @@ def tour() -> TourWorld:
 
 def documents(tour: TourWorld) -> tuple[dict[str, Any], dict[str, Any], dict[str, int]]:
     """graph and areas messages of a hand-made graph on the tour: corridor nodes, the door,
-    room nodes (one still unlabelled), as agent.pipeline makes them; and the key node ids."""
+    room nodes (one still unlabelled), as agent.core.pipeline makes them; and the key node ids."""
     g = NavigationGraph()
     corridor = [g.add_node(PLACE, (x, 1.5), votes={"corridor": 5}).id for x in (2.0, 4.0, 6.0, 8.0)]
     cx, cy = tour.doorway.center

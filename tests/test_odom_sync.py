@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.odom_sync import OdomSync, interpolate_pose
+from agent.core.odom_sync import OdomSync, interpolate_pose
 from drivers.messages import LaserScan, Pose2D
 
 

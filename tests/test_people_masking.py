@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from agent.pipeline import PeopleParams, Pipeline, PipelineParams
+from agent.core.pipeline import PeopleParams, Pipeline, PipelineParams
 from drivers.messages import LaserScan, Pose2D
 from knowledge.people.detector import LegDetector, SegmentDetection
 from knowledge.people.masking import fill_masked, free_standing, person_beams, unknown_masked

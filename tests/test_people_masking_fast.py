@@ -18,7 +18,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.pipeline import PeopleParams, is_full_turn
+from agent.core.pipeline import PeopleParams, is_full_turn
 from agent.tools.bench_agent import DriveScans
 from knowledge.people.detector import SegmentDetection
 from knowledge.people.masking import fill_masked, free_standing, person_beams, unknown_masked

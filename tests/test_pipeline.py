@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from agent.bus.schemas import SCHEMAS
-from agent.pipeline import (
+from agent.core.pipeline import (
     PeopleParams,
     Pipeline,
     PipelineParams,

@@ -24,9 +24,9 @@ import pytest
 from agent.bus.bridge import RawSample
 from agent.bus.codecs import LASER_SCAN_CODEC, POSE_CODEC
 from agent.bus.schemas import SCHEMAS
-from agent.commands.replay import read_recording_metadata, replay_recording
-from agent.odom_sync import SyncParams
-from agent.pipeline import Pipeline, PipelineParams, areas_message, graph_message
+from agent.core.odom_sync import SyncParams
+from agent.core.pipeline import Pipeline, PipelineParams, areas_message, graph_message
+from agent.recording.offline import read_recording_metadata, replay_recording
 from agent.recording.recorder import McapSink, recording_metadata
 from agent.recording.replay import McapMessages
 from drivers.messages import LaserScan, Pose2D

@@ -31,9 +31,9 @@ from agent.bus.queryable import query_state
 from agent.bus.schemas import SCHEMAS
 from agent.bus.session import BusConfig, bus_session, listening_endpoints
 from agent.bus.testing import settle, wait_until
-from agent.commands.replay import replay_recording
 from agent.config import load_config
-from agent.pipeline import areas_message, graph_message
+from agent.core.pipeline import areas_message, graph_message
+from agent.recording.offline import replay_recording
 from agent.recording.replay import McapMessages
 from agent.runtime import Agent
 from drivers.messages import LaserScan, Pose2D

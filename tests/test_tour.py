@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from agent.bus.schemas import INTENT_KINDS
-from agent.pipeline import Pipeline
+from agent.core.pipeline import Pipeline
 from drivers.messages import LaserScan, Pose2D
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.people.pipeline import PeoplePipeline

@@ -579,7 +579,7 @@ ERROR = MessageSchema(
     description="an error answer to a query or request",
 )
 
-# ---- the dialogue (agent/dialogue_agent.py, agent/dialogue/, docs/dialogue.md) ----------------
+# ---- the dialogue (agent/conversation/agent.py, agent/dialogue/, docs/dialogue.md) ----------------
 
 #: What a ``loci.intent/1`` can ask of the agent, and the ``args`` each kind takes.
 INTENT_KINDS = (

@@ -1,7 +1,7 @@
 """``loci evaluate log``: replay a recording of a real log and score it against its truth.
 
 The recording (``loci import`` of a CARMEN log or bag, or ``loci run --record``) is replayed
-exactly as ``loci replay`` does it (:func:`agent.commands.replay.replay_recording`); each
+exactly as ``loci replay`` does it (:func:`agent.recording.offline.replay_recording`); each
 processed scan's label, the final navigation graph and its areas are then scored by
 :func:`knowledge.evaluation.real_logs.evaluate` against per-scan labels (``.npz``) or a
 labelled map with the alignment of the log's frame to it. docs/real_logs.md describes the
@@ -184,10 +184,10 @@ def format_report(name: str, s: LogScores) -> str:
 def _evaluate_log(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from agent.commands.replay import replay_recording
     from agent.config import load_config
-    from agent.pipeline import PipelineParams, StepResult, areas_message, graph_message, place_message
+    from agent.core.pipeline import PipelineParams, StepResult, areas_message, graph_message, place_message
     from agent.progress import Progress
+    from agent.recording.offline import replay_recording
     from knowledge.evaluation.real_logs import evaluate
     from knowledge.fileio import atomic_write_text
     from knowledge.metric.mapping import ScanMapper
@@ -253,7 +253,7 @@ def _evaluate_log(args: argparse.Namespace) -> int:
         **scores.as_dict(),
     }
     if args.out_dir is not None:
-        from agent.mapviz import render_layered_map
+        from agent.core.mapviz import render_layered_map
         from knowledge.evaluation.real_logs import match_stamps
 
         d = args.out_dir

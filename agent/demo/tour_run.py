@@ -384,7 +384,7 @@ def _areas_summary(final: Mapping[str, Any]) -> list[dict[str, Any]]:
 
 
 def _picture(folder: Path, tour: Any, final: Mapping[str, Any]) -> str | None:
-    from agent.mapviz import render_layered_map
+    from agent.core.mapviz import render_layered_map
 
     graph = final.get("graph")
     if not graph:
@@ -423,7 +423,7 @@ def replay_check(
     """
     import subprocess
 
-    from agent.pipeline import areas_message
+    from agent.core.pipeline import areas_message
     from knowledge.topology import persistence
 
     shutil.rmtree(out_dir, ignore_errors=True)

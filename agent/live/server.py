@@ -223,7 +223,7 @@ class LiveView:
 
     # ------------------------------------------------------------------ called by the agent
     def on_step(self, result: Any) -> None:
-        """One processed scan (a :class:`~agent.pipeline.StepResult`)."""
+        """One processed scan (a :class:`~agent.core.pipeline.StepResult`)."""
         if self._listener.subscriptions <= 0:
             return
         self._resend()
@@ -246,7 +246,7 @@ class LiveView:
                 "/scan/full", _laser_scan(stamp, scan.frame_id, 0.0, 2.0 * math.pi / n, result.ranges), ns
             )
         if self._wants("/place"):
-            from agent.pipeline import place_message
+            from agent.core.pipeline import place_message
 
             self._log("/place", json.dumps(place_message(result)).encode(), ns)
         if result.people is not None and self._wants("/people"):

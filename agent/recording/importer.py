@@ -270,7 +270,7 @@ def import_log(
 def _metadata(
     robot: str, src: Path, kind: str, mount: tuple[float, float, float], extra: dict[str, str]
 ) -> dict[str, str]:
-    from agent.pipeline import PipelineParams
+    from agent.core.pipeline import PipelineParams
 
     return recording_metadata(
         robot,

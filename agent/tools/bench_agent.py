@@ -9,8 +9,8 @@ on every lap, which is not what the memory measurement is about).
 1. **Latency** (target p99 < 5 ms at 361 beams), one process, real parts only: the bytes of
    the scan's 0xB0 telegram (its last 64 bytes arrive last, as from a serial read) →
    :class:`~drivers.sick.codec.StreamParser` → ranges → :class:`~drivers.messages.LaserScan`
-   (as :class:`~drivers.sick.driver.LMS2xx` makes it) → :class:`~agent.odom_sync.OdomSync` →
-   :meth:`agent.pipeline.Pipeline.process` → the ``loci.place/1`` JSON (validated) → a Zenoh
+   (as :class:`~drivers.sick.driver.LMS2xx` makes it) → :class:`~agent.core.odom_sync.OdomSync` →
+   :meth:`agent.core.pipeline.Pipeline.process` → the ``loci.place/1`` JSON (validated) → a Zenoh
    publisher; a subscriber in a second Zenoh session (loopback TCP) notes the arrival. One
    scan every ``period`` seconds, each after the previous one arrived, so nothing queues.
    Stages: parse, sync, pipeline, encode, put, delivery; total = telegram → arrival.
@@ -23,7 +23,7 @@ on every lap, which is not what the memory measurement is about).
    queues otherwise). The highest sustained rate is refined by bisection; the throughput at
    the failing rates (scans processed per second while busy) is the agent's capacity.
 3. **Memory**: one simulated hour of touring (laps of the same building) through a
-   :class:`~agent.pipeline.Pipeline` as fast as the CPU goes, ``memory_rate`` scans per
+   :class:`~agent.core.pipeline.Pipeline` as fast as the CPU goes, ``memory_rate`` scans per
    simulated second; every simulated minute the traced Python heap (``tracemalloc``, after a
    garbage collection), the RSS, the graph's nodes and edges, the local map's points and the
    label window. Slopes are fitted over the hour and over its second half (after the first
@@ -61,8 +61,8 @@ from agent.bus.codecs import LASER_SCAN_CODEC, POSE_CODEC, json_codec
 from agent.bus.keys import stream_key
 from agent.bus.session import BusConfig, close_session, open_session
 from agent.bus.testing import session_pair, settle, wait_until
-from agent.odom_sync import OdomSync
-from agent.pipeline import PeopleParams, Pipeline, PipelineParams, place_message
+from agent.core.odom_sync import OdomSync
+from agent.core.pipeline import PeopleParams, Pipeline, PipelineParams, place_message
 from drivers.messages import LaserScan, Pose2D
 from drivers.sick import telegrams as tg
 from drivers.sick.codec import StreamParser, Telegram

@@ -2,7 +2,7 @@
 
 A drive along a generated office's corridor and into its rooms, ray cast as the agent's
 usual laser sees it (a 180° front laser, 361 beams, 1 cm noise), goes through three
-:class:`~agent.pipeline.Pipeline` s side by side, scan by scan, in the same process, so
+:class:`~agent.core.pipeline.Pipeline` s side by side, scan by scan, in the same process, so
 that the shared machine's load falls on all three alike:
 
 * **off**: ``process`` only (the baseline);
@@ -32,9 +32,9 @@ from typing import Any
 
 import numpy as np
 
+from agent.core.pipeline import Pipeline, PipelineParams
 from agent.live.probe import connect
 from agent.live.server import LiveView
-from agent.pipeline import Pipeline, PipelineParams
 from drivers.messages import LaserScan, Pose2D
 from knowledge.metric.raycast import cast
 from knowledge.places.model import PlaceModel, default_model_path

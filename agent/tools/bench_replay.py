@@ -7,7 +7,7 @@ association, the pipeline with people on, navigation graph and areas). Measured:
 * **replay**: the whole file's wall time and scans per second; the baseline is the log's own
   pace (its scans over its duration): ``× real time`` says how many times faster than the
   robot recorded it the agent gets through it;
-* **per scan**: the time of :meth:`~agent.pipeline.Pipeline.process` on each real scan (p50,
+* **per scan**: the time of :meth:`~agent.core.pipeline.Pipeline.process` on each real scan (p50,
   p99, max), with people on (the default) and off, in the same process; the ratio against the
   laser's period at the LMS's fastest rate (75 Hz: 13.3 ms) says how much room is left.
 
@@ -39,9 +39,9 @@ def per_scan(path: Path, model: Any, people: bool, limit: int | None) -> np.ndar
     from dataclasses import replace
 
     from agent.bus.codecs import LASER_SCAN_CODEC, POSE_CODEC
-    from agent.commands.replay import read_recording_metadata
-    from agent.odom_sync import OdomSync, SyncParams
-    from agent.pipeline import PeopleParams, Pipeline, PipelineParams
+    from agent.core.odom_sync import OdomSync, SyncParams
+    from agent.core.pipeline import PeopleParams, Pipeline, PipelineParams
+    from agent.recording.offline import read_recording_metadata
     from agent.recording.replay import McapMessages
     from agent.runtime import checked_decode
 
@@ -83,8 +83,8 @@ def main(argv: list[str] | None = None) -> int:
     if not log.is_file():
         print(f"{log} is absent: the real-log benchmark needs ../shared/data (or LOCI_DATA)", file=sys.stderr)
         return 2
-    from agent.commands.replay import replay_recording
     from agent.recording.importer import import_log
+    from agent.recording.offline import replay_recording
     from knowledge.places.model import PlaceModel, default_model_path
 
     model = PlaceModel.load(default_model_path())

@@ -35,11 +35,11 @@ import cv2
 import numpy as np
 
 from agent.commands.evaluate import _draw_doors
-from agent.commands.replay import replay_recording
-from agent.mapviz import render_layered_map
-from agent.pipeline import PeopleParams, PipelineParams, StepResult, areas_message, graph_message
+from agent.core.mapviz import render_layered_map
+from agent.core.pipeline import PeopleParams, PipelineParams, StepResult, areas_message, graph_message
 from agent.recording.carmen import CarmenOptions
 from agent.recording.importer import import_log
+from agent.recording.offline import replay_recording
 from knowledge.evaluation.real_logs import LogScores, Truth, evaluate, match_stamps
 from knowledge.fileio import atomic_write_text, write_image
 from knowledge.metric.mapping import ScanMapper
@@ -94,7 +94,7 @@ def replay(
 def thin_scans(src: Path, dst: Path, every: int) -> Path:
     """A copy of the recording ``src`` with every ``every``-th scan only (all else kept)."""
     from agent.bus.bridge import RawSample
-    from agent.commands.replay import read_recording_metadata
+    from agent.recording.offline import read_recording_metadata
     from agent.recording.recorder import McapSink
     from agent.recording.replay import McapMessages
 

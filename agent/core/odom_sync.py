@@ -10,7 +10,7 @@ time). A scan therefore waits until odometry newer than its stamp has arrived, f
 
 Why stamps and not arrival times: the pose then depends only on the scan and odometry
 messages, never on when they happened to be delivered, so a live run and a replay of its
-recording (:mod:`agent.commands.replay`) give every scan the same pose. The decisions that
+recording (:mod:`agent.recording.offline`) give every scan the same pose. The decisions that
 depend on arrival times (the timeouts below) are taken with the recorded arrival times
 (MCAP log times) in a replay, at the first message after the deadline, as live.
 

@@ -1,5 +1,5 @@
-"""The dialogue's bus task: intents and base statuses in, :class:`~agent.dialogue_agent.DialogueAgent`'s
-messages out, and its :meth:`~agent.dialogue_agent.DialogueAgent.tick` every ``period`` seconds.
+"""The dialogue's bus task: intents and base statuses in, :class:`~agent.conversation.agent.DialogueAgent`'s
+messages out, and its :meth:`~agent.conversation.agent.DialogueAgent.tick` every ``period`` seconds.
 
 Started by :mod:`agent.runtime`; everything it does with a message is the agent's (this
 module only moves payloads and keeps serving when one is bad). An intent that makes the
@@ -16,7 +16,7 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from agent.bus.bridge import BusClosed
-from agent.dialogue_agent import DialogueAgent, Outgoing
+from agent.conversation.agent import DialogueAgent, Outgoing
 from agent.ratelog import RateLimitedLog
 from knowledge.errors import ProtocolError
 

@@ -1,7 +1,7 @@
 """The agent's per-scan core: synchronous, deterministic, no I/O.
 
 ``Pipeline.process(scan, pose)`` takes one laser scan and the robot's odometry pose at the
-scan's stamp (:mod:`agent.odom_sync`) and runs, in this order:
+scan's stamp (:mod:`agent.core.odom_sync`) and runs, in this order:
 
 1. the laser's pose: the robot pose composed with the laser's mount (every position below,
    graph nodes included, is the laser's, in the odometry frame);
@@ -333,7 +333,7 @@ class Pipeline:
         if self.last_stamp is not None and scan.stamp < self.last_stamp:
             raise ValueError(
                 f"scan stamps must not go back in time ({scan.stamp} after {self.last_stamp}); "
-                "associate scans with odometry through agent.odom_sync.OdomSync"
+                "associate scans with odometry through agent.core.odom_sync.OdomSync"
             )
         sensor = compose(pose, self.params.mount)
         angles = self._beam_angles(scan)

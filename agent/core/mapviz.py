@@ -126,8 +126,8 @@ def render_layered_map(
 
     Args:
         grid: the occupancy grid (map frame).
-        graph_doc: a ``loci.graph/1`` message (:func:`agent.pipeline.graph_message`).
-        areas_doc: a ``loci.areas/1`` message (:func:`agent.pipeline.areas_message`), or None.
+        graph_doc: a ``loci.graph/1`` message (:func:`agent.core.pipeline.graph_message`).
+        areas_doc: a ``loci.areas/1`` message (:func:`agent.core.pipeline.areas_message`), or None.
         concepts: a ``loci.concepts/1`` snapshot ``{"areas": {id: AREA}, ...}`` (ids may be
             strings, as after JSON), or None.
         objects: ``{"name", "kind", "x", "y"}`` (map frame, metres) or ``{"name", "kind",
@@ -262,7 +262,7 @@ def _graph(doc: Mapping[str, Any]) -> tuple[dict[int, Mapping[str, Any]], list[t
     except (KeyError, TypeError, IndexError, ValueError) as exc:
         raise ValueError(
             "graph_doc must be a loci.graph/1 message with 'nodes' [{id, x, y, kind, label}] and "
-            "'edges' [[a, b]] (agent.pipeline.graph_message)"
+            "'edges' [[a, b]] (agent.core.pipeline.graph_message)"
         ) from exc
     for n in nodes.values():
         if not (math.isfinite(float(n["x"])) and math.isfinite(float(n["y"]))):
@@ -278,7 +278,7 @@ def _areas(doc: Mapping[str, Any] | None) -> list[Mapping[str, Any]]:
     except (KeyError, TypeError, ValueError) as exc:
         raise ValueError(
             "areas_doc must be a loci.areas/1 message with 'areas' [{id, label, nodes}] "
-            "(agent.pipeline.areas_message)"
+            "(agent.core.pipeline.areas_message)"
         ) from exc
 
 

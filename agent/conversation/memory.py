@@ -2,7 +2,7 @@
 
 :class:`MemoryConcepts` stands in for the conceptual service (:mod:`agent.conceptual_service`)
 when ``[conceptual]`` is off: what was said and seen is kept, nothing is inferred. It offers the
-service's interface (:class:`agent.dialogue_agent.Concepts`) and the part of
+service's interface (:class:`agent.conversation.agent.Concepts`) and the part of
 ``knowledge.conceptual.ConceptualMap`` the dialogue calls.
 """
 

@@ -3,7 +3,7 @@
 :class:`DialogueAgent` holds no socket: it reads the pipeline's map (``graph``, ``areas``)
 and a concepts store, and every method returns the messages to publish as
 :class:`Outgoing` ``(stream, message)`` pairs, so it is tested without a bus.
-:func:`agent.dialogue_task.run_dialogue` is the thin bus task around it (in :mod:`agent.runtime`).
+:func:`agent.conversation.task.run_dialogue` is the thin bus task around it (in :mod:`agent.runtime`).
 
 Every ``loci.intent/1`` gets exactly one ``loci.say/1`` with ``in_reply_to`` = its id
 (status ``ok``, ``accepted`` for a task that goes on, or ``error`` with a ``reason``). Tasks
@@ -20,7 +20,7 @@ lost. Contents (``docs/agent.md``):
   (:meth:`DialogueAgent.on_detections`) become objects of the current area and node; the
   report is ``{"objects": [{"name", "kind"}], "area": AREA}``;
 - ``follow_me`` → accepted; the people of each scan (the pipeline's
-  :attr:`~agent.pipeline.StepResult.people`) go through follow-me (:meth:`DialogueAgent.on_scan`)
+  :attr:`~agent.core.pipeline.StepResult.people`) go through follow-me (:meth:`DialogueAgent.on_scan`)
   to goals on ``base/goal``; refused when people detection is off; ``stop`` cancels everything;
 - ``answer`` → the open question (``loci.ask/1``).
 
@@ -37,7 +37,7 @@ removes the doorway node (the areas are recomputed, their events go to the conce
 "yes" keeps it and it is never asked about again.
 
 Without the conceptual service (:mod:`agent.conceptual_service`, on with ``[conceptual]``)
-:class:`~agent.dialogue_memory.MemoryConcepts` keeps what was said and seen in memory,
+:class:`~agent.conversation.memory.MemoryConcepts` keeps what was said and seen in memory,
 without reasoning.
 """
 
@@ -55,9 +55,9 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol, TypeVar
 
 from agent.bus.schemas import MAX_JSON_DEPTH, SMALL_MESSAGE_BYTES, json_depth
+from agent.conversation.memory import AREA_CLASSES, MemoryConcepts, class_of_words
 from agent.dialogue.referring import answer_text, describe_target, kind_words
 from agent.dialogue.referring import with_article as _with_article
-from agent.dialogue_memory import AREA_CLASSES, MemoryConcepts, class_of_words
 from agent.ratelog import RateLimitedLog
 from knowledge.errors import LociError
 from knowledge.navigation.graph import PLACE, NavigationGraph
@@ -88,7 +88,7 @@ class Outgoing:
 
 
 class MapState(Protocol):
-    """What the dialogue reads of the map (the :class:`~agent.pipeline.Pipeline` is one)."""
+    """What the dialogue reads of the map (the :class:`~agent.core.pipeline.Pipeline` is one)."""
 
     graph: NavigationGraph
     areas: AreaMap
@@ -161,8 +161,8 @@ class DialogueAgent:
         world: the map (``graph``, ``areas``): the running pipeline.
         concepts: the conceptual service (default: a :class:`MemoryConcepts`).
         can_recognise: whether camera recognitions will come (look_around needs them).
-        follow_factory: makes a follow-me controller (``agent.follow.FollowMe``); None:
-            import ``agent.follow`` when asked (an error reply if it is not there).
+        follow_factory: makes a follow-me controller (``agent.core.follow.FollowMe``); None:
+            import ``agent.core.follow`` when asked (an error reply if it is not there).
         people: whether the scans come with people (``[people] enabled``); follow-me needs them.
         commit: awaited after each change of the concepts and before the reply that
             acknowledges it: makes the map (graph and areas) the change refers to durable
@@ -607,9 +607,11 @@ class DialogueAgent:
     async def _on_follow_me(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:
         if self._follow_factory is None:
             try:
-                from agent.follow import FollowMe
+                from agent.core.follow import FollowMe
             except ImportError as exc:
-                raise LociError("I cannot follow people: follow-me is not installed (agent.follow).") from exc
+                raise LociError(
+                    "I cannot follow people: follow-me is not installed (agent.core.follow)."
+                ) from exc
             self._follow_factory = FollowMe
         if not self.people_on:
             raise LociError("I cannot follow people: people detection is off ([people] enabled = false).")

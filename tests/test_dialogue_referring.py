@@ -12,8 +12,8 @@ from agent.dialogue.referring import (
     describe_target,
     indefinite,
     join_words,
-    kind_words,
 )
+from knowledge.conceptual.lexicon import kind_words
 
 TV = {"name": "tv-1", "kind": "Television"}
 COUCH = {"name": "couch", "kind": "Couch"}

@@ -35,7 +35,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from agent.dialogue.referring import GENERIC_TYPES, kind_words
+from knowledge.conceptual.lexicon import GENERIC_TYPES, kind_words
 from knowledge.fileio import write_image
 from knowledge.labels import CLASS_CODES, CLASS_COLORS_BGR, CLASS_NAMES, DOORWAY
 from knowledge.metric.grid import OccupancyGrid

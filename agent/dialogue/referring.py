@@ -25,10 +25,8 @@ import re
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-#: Ontology classes that say no more than the place class: never used as a description.
-GENERIC_TYPES = frozenset(
-    {"thing", "place", "area", "location", "room", "corridor", "hallway", "doorway", "space", "region"}
-)
+from knowledge.conceptual.lexicon import GENERIC_TYPES, kind_words
+
 #: Place classes that are usually one of a kind in a tour: "the corridor" rather than "a corridor".
 UNIQUE_CLASSES = frozenset({"corridor", "hallway"})
 #: Object kinds too vague to name an object by ("the room with the object").
@@ -36,27 +34,9 @@ _GENERIC_KINDS = frozenset({"thing", "object", "physicalobject", "item"})
 #: At most this many objects in "the room with the television and the couch".
 MAX_OBJECTS = 2
 
-_CAMEL = re.compile(r"[A-Z]+(?=[A-Z][a-z])|[A-Z]?[a-z]+|[A-Z]+|\d+")
 _VOWEL_SOUND = re.compile(r"[aeiou]|hour|honest|honou?r", re.IGNORECASE)
 _NOT_VOWEL_SOUND = re.compile(r"uni|use|usu|eu|one|once", re.IGNORECASE)
 _DETERMINED = re.compile(r"(the|a|an|this|that|my|your|his|her|our|their)\s", re.IGNORECASE)
-
-
-def kind_words(kind: str) -> str:
-    """An ontology class name as lower-case words: "LivingRoom" → "living room".
-
-    Underscores and hyphens separate words too ("coffee_machine" → "coffee machine"); text
-    that already has spaces is only lower-cased; acronyms stay together ("TVSet" → "tv set").
-    """
-    text = kind.strip()
-    if not text:
-        return ""
-    if " " in text:
-        return " ".join(text.lower().split())
-    words: list[str] = []
-    for part in re.split(r"[_\-]+", text):
-        words.extend(_CAMEL.findall(part) or [part])
-    return " ".join(w.lower() for w in words if w)
 
 
 def indefinite(noun: str) -> str:

@@ -14,6 +14,30 @@ _ARTICLES = ("the ", "a ", "an ", "this ", "that ", "my ", "our ", "your ")
 _CAMEL = re.compile(r"(?<=[a-z0-9])(?=[A-Z])")
 
 
+#: Ontology classes that say no more than the place class: never used as a description.
+GENERIC_TYPES = frozenset(
+    {"thing", "place", "area", "location", "room", "corridor", "hallway", "doorway", "space", "region"}
+)
+_WORD_OF_CLASS = re.compile(r"[A-Z]+(?=[A-Z][a-z])|[A-Z]?[a-z]+|[A-Z]+|\d+")
+
+
+def kind_words(kind: str) -> str:
+    """An ontology class name as lower-case words: "LivingRoom" → "living room".
+
+    Underscores and hyphens separate words too ("coffee_machine" → "coffee machine"); text
+    that already has spaces is only lower-cased; acronyms stay together ("TVSet" → "tv set").
+    """
+    text = kind.strip()
+    if not text:
+        return ""
+    if " " in text:
+        return " ".join(text.lower().split())
+    words: list[str] = []
+    for part in re.split(r"[_\-]+", text):
+        words.extend(_WORD_OF_CLASS.findall(part) or [part])
+    return " ".join(w.lower() for w in words if w)
+
+
 def normalise(words: str) -> str:
     """Lower case, punctuation other than apostrophes dropped, leading articles removed."""
     w = re.sub(r"[^\w' ]+", " ", words.lower().replace("_", " "))

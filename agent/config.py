@@ -33,9 +33,8 @@ import dataclasses
 import math
 import os
 import tomllib
-import types
 import typing
-from collections.abc import Callable, Collection, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
@@ -45,6 +44,7 @@ from agent.bus.session import DEFAULT_AGENT_ENDPOINT, BusConfig
 from agent.core.odom_sync import SyncParams
 from agent.live.config import FoxgloveConfig
 from agent.ros2.config import Ros2Config
+from agent.tables import build_dataclass
 from knowledge.errors import ConfigError
 from knowledge.metric.local_map import LocalMapParams
 from knowledge.metric.rear_beams import FullScanParams
@@ -61,20 +61,20 @@ def _split_list(text: str) -> list[str]:
     return [p.strip() for p in text.split(",") if p.strip()]
 
 
-#: Environment variables and the key each sets: (section, key, parser of the text).
-#: An empty variable counts as unset. ``LOCI_CONFIG`` names the file when ``--config`` is absent.
-ENV_VARS: dict[str, tuple[str, str, Callable[[str], Any]]] = {
-    "LOCI_ROBOT": ("robot", "name", str),
-    "LOCI_LASER_PORT": ("laser", "port", str),
-    "LOCI_LASER_SOURCE": ("laser", "source", str),
-    "LOCI_MODEL": ("places", "model", str),
-    "LOCI_STATE_DIR": ("state", "dir", str),
-    "LOCI_RECORD": ("record", "path", str),
-    "LOCI_BUS_MODE": ("bus", "mode", str),
-    "LOCI_BUS_LISTEN": ("bus", "listen", _split_list),
-    "LOCI_BUS_CONNECT": ("bus", "connect", _split_list),
-    "LOCI_BUS_CONFIG_FILE": ("bus", "config_file", str),
-}
+def env_vars(sections: Mapping[str, type]) -> dict[str, tuple[str, str, Callable[[str], Any]]]:
+    """Environment variable → (section, key, parser of its text), from the ``env`` metadata of
+    the configuration's fields: the one place a variable is named, so code and units agree."""
+    out: dict[str, tuple[str, str, Callable[[str], Any]]] = {}
+    for section, cls in sections.items():
+        hints = typing.get_type_hints(cls)
+        for f in dataclasses.fields(cls):
+            var = f.metadata.get("env")
+            if var:
+                many = typing.get_origin(hints[f.name]) in (tuple, list)
+                out[var] = (section, f.name, _split_list if many else str)
+    return out
+
+
 CONFIG_ENV = "LOCI_CONFIG"
 
 # keys holding paths, resolved against the config file's folder when they come from it
@@ -98,7 +98,7 @@ _PATH_LIST_KEYS = {("conceptual", "ontologies")}
 class RobotConfig:
     """``[robot]``: ``name`` is the second chunk of every key (default: the host name)."""
 
-    name: str = ""
+    name: str = field(default="", metadata={"env": "LOCI_ROBOT"})
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "name", robot_name(self.name or None))
@@ -143,8 +143,8 @@ class LaserConfig:
         mount: the laser's pose on the robot.
     """
 
-    source: str = ""
-    port: str | None = None
+    source: str = field(default="", metadata={"env": "LOCI_LASER_SOURCE"})
+    port: str | None = field(default=None, metadata={"env": "LOCI_LASER_PORT"})
     baud: int | None = None
     variant: str = "180/0.5"
     frame_id: str = "laser"
@@ -211,7 +211,7 @@ class PlacesConfig:
     """``[places]``: ``model`` (a ``.npz`` path, or ``"default"`` for the bundled one) and
     ``window``, the N last scan labels a node's majority vote counts."""
 
-    model: str = "default"
+    model: str = field(default="default", metadata={"env": "LOCI_MODEL"})
     window: int = 10
 
     def __post_init__(self) -> None:
@@ -231,7 +231,7 @@ class StateConfig:
     it is written at most every ``save_interval`` seconds while the graph changes, and on
     shutdown; ``resume = false`` starts a new map (the old file is replaced at the first save)."""
 
-    dir: str = ""
+    dir: str = field(default="", metadata={"env": "LOCI_STATE_DIR"})
     save_interval: float = 2.0
     resume: bool = True
 
@@ -251,7 +251,7 @@ class RecordConfig:
     ``strftime`` codes such as ``%Y%m%d-%H%M%S`` are expanded at start), flushed every
     ``flush_interval`` seconds; an existing file is an error unless ``overwrite``."""
 
-    path: str | None = None
+    path: str | None = field(default=None, metadata={"env": "LOCI_RECORD"})
     flush_interval: float = 1.0
     overwrite: bool = False
 
@@ -413,84 +413,16 @@ class AgentConfig:
         return self.robot.name
 
 
-# ---------------------------------------------------------------------------- typed tables
-
-
-def _type_name(tp: Any) -> str:
-    return {bool: "true or false", int: "an integer", float: "a number", str: "a string"}.get(
-        tp, getattr(tp, "__name__", str(tp))
-    )
-
-
-def _coerce(value: Any, tp: Any, where: str) -> Any:
-    """``value`` (from TOML) as type ``tp`` (a field's annotation), or a ConfigError."""
-    origin = typing.get_origin(tp)
-    if origin in (types.UnionType, typing.Union):
-        args = [a for a in typing.get_args(tp) if a is not type(None)]
-        if value is None:
-            return None
-        return _coerce(value, args[0], where)
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"{where} must be true or false, got {value!r}")
-        return value
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{where} must be an integer, got {value!r}")
-        return value
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ConfigError(f"{where} must be a number, got {value!r}")
-        return float(value)
-    if tp is str:
-        if not isinstance(value, str):
-            raise ConfigError(f"{where} must be a string, got {value!r}")
-        return value
-    if origin is tuple:
-        inner = typing.get_args(tp)[0]
-        if not isinstance(value, list | tuple):
-            raise ConfigError(f"{where} must be a list of {_type_name(inner)}s, got {value!r}")
-        return tuple(_coerce(v, inner, f"{where}[{i}]") for i, v in enumerate(value))
-    if dataclasses.is_dataclass(tp) and isinstance(tp, type):
-        if not isinstance(value, Mapping):
-            raise ConfigError(f"{where} must be a table, e.g. [{where}]")
-        return build_dataclass(tp, value, where)
-    raise ConfigError(f"{where}: unsupported setting type {tp!r}")  # pragma: no cover - a bug
-
-
-def build_dataclass(cls: type[T], table: Mapping[str, Any], where: str, *, skip: Collection[str] = ()) -> T:
-    """A frozen dataclass from a TOML table: every key must be a field (except ``skip``),
-    of the field's type; the dataclass's own checks become ConfigErrors naming ``where``."""
-    if not dataclasses.is_dataclass(cls):
-        raise TypeError(f"{cls!r} is not a dataclass")
-    hints = typing.get_type_hints(cls)
-    known = [f.name for f in dataclasses.fields(cls) if f.init and f.name not in skip]
-    kwargs: dict[str, Any] = {}
-    for key, value in table.items():
-        if key not in known:
-            raise ConfigError(f"[{where}]: unknown key {key!r} (known: {', '.join(sorted(known))})")
-        kwargs[key] = _coerce(value, hints[key], f"{where}.{key}")
-    try:
-        return cls(**kwargs)
-    except ConfigError:
-        raise
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"[{where}]: {exc}") from exc
-
-
-def dataclass_table(obj: Any) -> dict[str, Any]:
-    """The fields of a (nested) dataclass as a plain dict (the inverse of :func:`build_dataclass`)."""
-    out: dict[str, Any] = {}
-    for f in dataclasses.fields(obj):
-        v = getattr(obj, f.name)
-        if dataclasses.is_dataclass(v) and not isinstance(v, type):
-            v = dataclass_table(v)
-        elif isinstance(v, tuple):
-            v = list(v)
-        elif isinstance(v, Path):
-            v = str(v)
-        out[f.name] = v
-    return out
+#: Environment variable → (section, key, parser of its text); an empty variable counts as
+#: unset. ``LOCI_CONFIG`` names the file when ``--config`` is absent. Made from the fields'
+#: ``env`` metadata (:func:`env_vars`).
+ENV_VARS = env_vars(
+    {
+        name: tp
+        for name, tp in typing.get_type_hints(AgentConfig).items()
+        if isinstance(tp, type) and dataclasses.is_dataclass(tp)
+    }
+)
 
 
 # ---------------------------------------------------------------------------- loading
@@ -622,10 +554,7 @@ def _build(data: Mapping[str, Mapping[str, Any]], file: Path | None, env: Mappin
     if "listen" not in bus_table:
         # the agent listens where `loci record` looks for it; a router's client does not listen
         bus_table["listen"] = [DEFAULT_AGENT_ENDPOINT] if bus_table.get("mode", "peer") == "peer" else []
-    try:
-        bus = BusConfig.from_mapping(bus_table, where="bus")
-    except TypeError as exc:  # pragma: no cover - from_mapping checks the types it knows
-        raise ConfigError(f"[bus]: {exc}") from exc
+    bus = BusConfig.from_mapping(bus_table, where="bus")
     places = build_dataclass(PlacesConfig, sec("places"), "places")
     nav = dict(sec("navigation"))
     doors = nav.pop("doorways", {})

@@ -169,7 +169,7 @@ def test_defaults_without_a_file() -> None:
         ({"navigation": {"doorways": {"width": 1.0}}}, r"\[navigation.doorways\]: unknown key 'width'"),
         ({"navigation": {"window": 5}}, r"places.window"),
         ({"rear_beams": {"n_beams": 180}}, r"\[rear_beams\]: unknown key 'n_beams'"),
-        ({"bus": {"listne": []}}, r"bus: unknown key 'listne'"),
+        ({"bus": {"listne": []}}, r"\[bus\]: unknown key 'listne'"),
         ({"navigation": {"node_distance": "1"}}, r"navigation.node_distance must be a number, got '1'"),
         ({"navigation": {"node_distance": True}}, r"navigation.node_distance must be a number"),
         ({"local_map": {"max_points": 2.5}}, r"local_map.max_points must be an integer"),
@@ -283,3 +283,25 @@ def test_loci_run_refuses_a_bad_configuration(tmp_path: Path) -> None:
         env={"PATH": "/usr/bin:/bin", "HOME": str(tmp_path)},
     )
     assert out.returncode == 2 and "unknown key 'prot'" in out.stderr, out.stderr
+
+
+def test_every_environment_variable_a_unit_sets_is_one_the_configuration_reads() -> None:
+    """The variables come from the configuration's own fields (``env`` metadata), so a systemd
+    unit that sets one the code does not read (LOCI_BUS_CONFIG_FILE once) fails here."""
+    import re
+
+    units = sorted((REPO / "deploy" / "systemd").glob("*.service"))
+    assert units
+    for unit in units:
+        for var in re.findall(r"^Environment=(LOCI_\w+)=", unit.read_text(), flags=re.M):
+            assert var in ENV_VARS, f"{unit.name} sets {var}, which no configuration field reads"
+    # and each variable really sets its key
+    for var, (section, key, _) in ENV_VARS.items():
+        value = "tcp/127.0.0.1:7450" if section == "bus" and key in ("listen", "connect") else "x"
+        if (section, key) == ("bus", "mode"):
+            value = "peer"  # client mode would need a router's endpoint as well
+        if (section, key) == ("laser", "source"):
+            value = "bus"
+        cfg = load_config(table={"laser": {"port": "/dev/null"}}, env={var: value})
+        got = getattr(getattr(cfg, section), key)
+        assert got == value or got == (value,) or str(got).endswith(value), (var, got)

@@ -20,7 +20,7 @@ import logging
 import re
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field
 from typing import Any
 
 import zenoh
@@ -52,11 +52,11 @@ class BusConfig:
             control: see deploy/zenoh/); mode, endpoints and scouting above are set over it.
     """
 
-    mode: str = "peer"
-    listen: tuple[str, ...] = ("tcp/127.0.0.1:0",)
-    connect: tuple[str, ...] = ()
+    mode: str = field(default="peer", metadata={"env": "LOCI_BUS_MODE"})
+    listen: tuple[str, ...] = field(default=("tcp/127.0.0.1:0",), metadata={"env": "LOCI_BUS_LISTEN"})
+    connect: tuple[str, ...] = field(default=(), metadata={"env": "LOCI_BUS_CONNECT"})
     multicast_scouting: bool = False
-    config_file: str | None = None
+    config_file: str | None = field(default=None, metadata={"env": "LOCI_BUS_CONFIG_FILE"})
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "listen", tuple(self.listen))
@@ -81,25 +81,11 @@ class BusConfig:
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], where: str = "bus") -> BusConfig:
-        """Build from a TOML table; unknown keys are a :class:`ConfigError` naming the key."""
-        known = {f.name for f in fields(cls)}
-        for key in values:
-            if key not in known:
-                raise ConfigError(f"{where}: unknown key {key!r} (known: {', '.join(sorted(known))})")
-        kwargs: dict[str, Any] = dict(values)
-        for key in ("listen", "connect"):
-            if key in kwargs:
-                v = kwargs[key]
-                if isinstance(v, str) or not isinstance(v, list | tuple):
-                    raise ConfigError(
-                        f"{where}.{key} must be a list of endpoints, e.g. ['tcp/127.0.0.1:7447']"
-                    )
-                kwargs[key] = tuple(v)
-        if "mode" in kwargs and not isinstance(kwargs["mode"], str):
-            raise ConfigError(f"{where}.mode must be 'peer' or 'client'")
-        if "multicast_scouting" in kwargs and not isinstance(kwargs["multicast_scouting"], bool):
-            raise ConfigError(f"{where}.multicast_scouting must be true or false")
-        return cls(**kwargs)
+        """Build from a TOML table (:func:`agent.tables.build_dataclass`): unknown keys and
+        values of the wrong type are a :class:`ConfigError` naming the key."""
+        from agent.tables import build_dataclass
+
+        return build_dataclass(cls, values, where)
 
     @property
     def picks_free_port(self) -> bool:

@@ -53,7 +53,8 @@ from typing import Any
 
 import numpy as np
 
-from agent.config import AgentConfig, build_dataclass, dataclass_table
+from agent.config import AgentConfig
+from agent.tables import build_dataclass, dataclass_table
 from drivers.messages import LaserScan, Pose2D
 from knowledge.metric.local_map import LocalMap, LocalMapParams, beam_endpoints
 from knowledge.metric.rear_beams import FullScanParams, assemble_scan

@@ -15,7 +15,8 @@ import numpy as np
 def _readonly(a: np.ndarray | None, dtype: type[np.generic]) -> np.ndarray | None:
     if a is None:
         return None
-    arr = np.array(a, dtype=dtype, copy=True)
+    with np.errstate(over="ignore"):  # doubles beyond float32's range become ±inf, no warning
+        arr = np.array(a, dtype=dtype, copy=True)
     arr.setflags(write=False)
     return arr
 

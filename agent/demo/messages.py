@@ -1,4 +1,4 @@
-"""The simulated tutor's two bus messages (the demo's own; not part of :mod:`agent.bus.schemas`).
+"""The simulated tutor's two bus messages (the demo's own keys).
 
 ``loci/<robot>/sim/tutor`` (``loci.tutor_cmd/1``, JSON, demo → simulator): what the tutor
 does next, one of
@@ -13,17 +13,18 @@ the tutor's body in the map frame (metres, radians), whether it has a walk to fi
 whether it waits for the robot, metres left, and how many walks it has finished.
 
 Both are JSON with the Zenoh encoding ``application/json`` (a recorder keeps them without a
-schema). Validation errors are :class:`ValueError` s that say what is wrong.
+schema); their one definition is in :mod:`agent.bus.schemas` (``TUTOR_CMD``,
+``TUTOR_STATE``). Validation errors are :class:`ValueError` s that say what is wrong.
 """
 
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 from agent.bus.keys import stream_key
+from agent.bus.schemas import SCHEMAS
 
 __all__ = [
     "ENCODING",
@@ -63,33 +64,22 @@ def walk_cmd(walk: str | Sequence[Sequence[float]]) -> dict[str, Any]:
 
 
 def validate_cmd(msg: Mapping[str, Any]) -> dict[str, Any]:
-    """``msg`` checked as a ``loci.tutor_cmd/1`` (a new dict).
+    """``msg`` checked as a ``loci.tutor_cmd/1`` (:data:`agent.bus.schemas.TUTOR_CMD`, its one
+    definition; ``schema`` may be left out), as a new dict with waypoints as floats.
 
     Raises:
         ValueError: not a tutor command; the message says which part is wrong.
     """
     if not isinstance(msg, Mapping):
         raise ValueError("a tutor command is a JSON object")
-    if msg.get("schema", TUTOR_CMD) != TUTOR_CMD:
-        raise ValueError(f"a tutor command has schema {TUTOR_CMD!r}, got {msg.get('schema')!r}")
-    if msg.get("stop") is True:
+    doc = {"schema": TUTOR_CMD, **msg}
+    SCHEMAS.validate(doc, TUTOR_CMD)
+    if doc.get("stop") is True:
         return {"schema": TUTOR_CMD, "stop": True}
-    walk = msg.get("walk")
-    if isinstance(walk, str) and walk:
+    walk = doc["walk"]
+    if isinstance(walk, str):
         return {"schema": TUTOR_CMD, "walk": walk}
-    if isinstance(walk, list) and walk:
-        pts: list[list[float]] = []
-        for p in walk:
-            if (
-                not isinstance(p, list | tuple)
-                or len(p) != 2
-                or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in p)
-                or not all(math.isfinite(float(v)) for v in p)
-            ):
-                raise ValueError(f"a waypoint is [x, y] in metres (finite numbers), got {p!r}")
-            pts.append([float(p[0]), float(p[1])])
-        return {"schema": TUTOR_CMD, "walk": pts}
-    raise ValueError('a tutor command is {"walk": LEG NAME or [[x, y], ...]} or {"stop": true}')
+    return {"schema": TUTOR_CMD, "walk": [[float(x), float(y)] for x, y in walk]}
 
 
 def state_message(

@@ -30,7 +30,6 @@ no half-built graph is ever returned.
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -38,6 +37,7 @@ from typing import Any
 from knowledge.errors import ProtocolError
 from knowledge.fileio import atomic_write_text
 from knowledge.navigation.graph import NODE_KINDS, GraphParams, NavigationGraph
+from knowledge.schema import MessageSchema, Spec, array, integer, mapping, number, obj, string
 from knowledge.topology.areas import Area, AreaMap
 
 __all__ = ["SCHEMA", "dumps", "from_document", "load", "loads", "save", "to_document"]
@@ -143,53 +143,67 @@ def load(path: str | Path) -> tuple[NavigationGraph, AreaMap | None]:
 
 # ---------------------------------------------------------------------------- validation
 
+_NODE = obj(
+    {
+        "id": integer(minimum=1),
+        "kind": string(choices=NODE_KINDS),
+        "x": number(description="metres"),
+        "y": number(description="metres"),
+        "label": string(max_length=64, nullable=True),
+        "votes": mapping(integer(minimum=0), description="label -> votes"),
+        "visits": integer(minimum=0),
+        "width": number(nullable=True, description="metres (doorways)"),
+        "orientation": number(nullable=True, description="radians (doorways)"),
+    }
+)
+#: The one definition of the document: every field's type and range (:mod:`knowledge.schema`);
+#: what spans fields (ids, edges, areas) is checked as the graph is built.
+DOCUMENT = MessageSchema(
+    "loci.navgraph",
+    VERSION,
+    obj(
+        {
+            "frame": string(choices=("odom",)),
+            "params": obj(
+                {
+                    "node_distance": number(minimum=0),
+                    "reach": number(minimum=0, nullable=True),
+                    "window": integer(minimum=1),
+                    "ignore_labels": array(string(max_length=64)),
+                    "door_merge": number(minimum=0),
+                },
+                # documents written before min_coverage existed: every label voted then
+                {"min_coverage": number(minimum=0, maximum=1)},
+            ),
+            "next_node_id": integer(minimum=1),
+            "current": integer(minimum=1, nullable=True),
+            "recent_labels": array(string(max_length=64, nullable=True)),
+            "nodes": array(_NODE),
+            "edges": array(obj({"source": integer(), "target": integer(), "length": number(minimum=0)})),
+            "areas": obj(
+                {
+                    "next_area_id": integer(minimum=1),
+                    "areas": array(
+                        obj(
+                            {
+                                "id": integer(minimum=1),
+                                "label": string(max_length=64, nullable=True),
+                                "nodes": array(integer()),
+                            }
+                        )
+                    ),
+                },
+                nullable=True,
+            ),
+        },
+        {"meta": mapping(Spec("any", nullable=True), description="free-form, e.g. the robot's name")},
+    ),
+    description="the navigation graph and its areas, as persisted (navgraph.json)",
+)
+
 
 class _Bad(Exception):
-    """A validation failure (turned into ProtocolError with the document path)."""
-
-
-def _get(d: Mapping[str, Any], key: str, where: str) -> Any:
-    if key not in d:
-        raise _Bad(f"{where} lacks {key!r}")
-    return d[key]
-
-
-def _int(v: Any, where: str, lo: int | None = None) -> int:
-    if isinstance(v, bool) or not isinstance(v, int):
-        raise _Bad(f"{where} must be an integer, got {v!r}")
-    if lo is not None and v < lo:
-        raise _Bad(f"{where} must be >= {lo}, got {v}")
-    return v
-
-
-def _opt_float(v: Any, where: str) -> float | None:
-    return None if v is None else _float(v, where)
-
-
-def _float(v: Any, where: str) -> float:
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-        raise _Bad(f"{where} must be a finite number, got {v!r}")
-    return float(v)
-
-
-def _str(v: Any, where: str, *, optional: bool = False) -> str | None:
-    if v is None and optional:
-        return None
-    if not isinstance(v, str) or not v:
-        raise _Bad(f"{where} must be a non-empty string, got {v!r}")
-    return v
-
-
-def _list(v: Any, where: str) -> list[Any]:
-    if not isinstance(v, list):
-        raise _Bad(f"{where} must be a list, got {type(v).__name__}")
-    return v
-
-
-def _dict(v: Any, where: str) -> dict[str, Any]:
-    if not isinstance(v, dict):
-        raise _Bad(f"{where} must be an object, got {type(v).__name__}")
-    return v
+    """An inconsistency across fields (turned into ProtocolError)."""
 
 
 def check_schema(doc: Any) -> None:
@@ -221,6 +235,10 @@ def from_document(doc: Any) -> tuple[NavigationGraph, AreaMap | None]:
     """
     check_schema(doc)
     try:
+        DOCUMENT.validate(doc)
+    except ProtocolError as exc:
+        raise ProtocolError(f"malformed {exc}") from None
+    try:
         return _build(doc)
     except _Bad as exc:
         raise ProtocolError(f"malformed {SCHEMA} document: {exc}") from None
@@ -229,92 +247,68 @@ def from_document(doc: Any) -> tuple[NavigationGraph, AreaMap | None]:
 
 
 def _build(doc: dict[str, Any]) -> tuple[NavigationGraph, AreaMap | None]:
-    frame = _get(doc, "frame", "the document")
-    if frame != "odom":
-        raise _Bad(f"frame must be 'odom', got {frame!r}")
-    p = _dict(_get(doc, "params", "the document"), "params")
-    ignore = _list(_get(p, "ignore_labels", "params"), "params.ignore_labels")
+    """The graph of a document whose fields have their types (:data:`DOCUMENT`)."""
+    p = doc["params"]
     params = GraphParams(
-        node_distance=_float(_get(p, "node_distance", "params"), "params.node_distance"),
-        reach=_opt_float(_get(p, "reach", "params"), "params.reach"),
-        window=_int(_get(p, "window", "params"), "params.window", 1),
-        ignore_labels=tuple(str(_str(v, "params.ignore_labels[]")) for v in ignore),
-        door_merge=_float(_get(p, "door_merge", "params"), "params.door_merge"),
-        # documents written before min_coverage existed: every label voted then
-        min_coverage=_float(p["min_coverage"], "params.min_coverage") if "min_coverage" in p else 0.0,
+        node_distance=float(p["node_distance"]),
+        reach=None if p["reach"] is None else float(p["reach"]),
+        window=p["window"],
+        ignore_labels=tuple(p["ignore_labels"]),
+        door_merge=float(p["door_merge"]),
+        min_coverage=float(p.get("min_coverage", 0.0)),
     )
     g = NavigationGraph(params)
-    next_id = _int(_get(doc, "next_node_id", "the document"), "next_node_id", 1)
-    for i, raw in enumerate(_list(_get(doc, "nodes", "the document"), "nodes")):
+    next_id = doc["next_node_id"]
+    for i, n in enumerate(doc["nodes"]):
         where = f"nodes[{i}]"
-        n = _dict(raw, where)
-        nid = _int(_get(n, "id", where), f"{where}.id", 1)
+        nid = n["id"]
         if nid >= next_id:
             raise _Bad(f"{where}.id {nid} is not below next_node_id {next_id}")
         if nid in g.nodes:
             raise _Bad(f"{where}.id {nid} is repeated")
-        kind = _get(n, "kind", where)
-        if kind not in NODE_KINDS:
-            raise _Bad(f"{where}.kind must be one of {NODE_KINDS}, got {kind!r}")
-        votes = _dict(_get(n, "votes", where), f"{where}.votes")
-        for k, v in votes.items():
-            _int(v, f"{where}.votes[{k!r}]", 0)
         node = g.add_node(
-            kind,
-            (_float(_get(n, "x", where), f"{where}.x"), _float(_get(n, "y", where), f"{where}.y")),
-            width=_opt_float(_get(n, "width", where), f"{where}.width"),
-            orientation=_opt_float(_get(n, "orientation", where), f"{where}.orientation"),
+            n["kind"],
+            (float(n["x"]), float(n["y"])),
+            width=None if n["width"] is None else float(n["width"]),
+            orientation=None if n["orientation"] is None else float(n["orientation"]),
             node_id=nid,
         )
-        node.votes = {str(k): int(v) for k, v in votes.items()}
-        label = _str(_get(n, "label", where), f"{where}.label", optional=True)
-        if kind == "place" and label is not None and label not in votes:
+        node.votes = {str(k): int(v) for k, v in n["votes"].items()}
+        label = n["label"]
+        if n["kind"] == "place" and label is not None and label not in node.votes:
             raise _Bad(f"{where}.label {label!r} has no votes")
-        node.label = label if kind == "place" else "doorway"
-        node.visits = _int(_get(n, "visits", where), f"{where}.visits", 0)
-    for i, raw in enumerate(_list(_get(doc, "edges", "the document"), "edges")):
-        where = f"edges[{i}]"
-        e = _dict(raw, where)
-        a = _int(_get(e, "source", where), f"{where}.source")
-        b = _int(_get(e, "target", where), f"{where}.target")
-        _float(_get(e, "length", where), f"{where}.length")
+        node.label = label if n["kind"] == "place" else "doorway"
+        node.visits = n["visits"]
+    for i, e in enumerate(doc["edges"]):
+        a, b = e["source"], e["target"]
         if a not in g.nodes or b not in g.nodes or a == b:
-            raise _Bad(f"{where} joins unknown or identical nodes ({a}, {b})")
+            raise _Bad(f"edges[{i}] joins unknown or identical nodes ({a}, {b})")
         g.add_edge(a, b)
-    current = _get(doc, "current", "the document")
-    if current is not None and (_int(current, "current") not in g.nodes):
+    current = doc["current"]
+    if current is not None and current not in g.nodes:
         raise _Bad(f"current node {current} is not a node")
-    labels = _list(_get(doc, "recent_labels", "the document"), "recent_labels")
-    g.recent.extend(_str(v, "recent_labels[]", optional=True) for v in labels[-params.window :])
+    g.recent.extend(doc["recent_labels"][-params.window :])
     g.current = current
     g._next_id = next_id
-    areas = _build_areas(doc, g)
-    return g, areas
+    return g, _build_areas(doc["areas"], g)
 
 
-def _build_areas(doc: dict[str, Any], g: NavigationGraph) -> AreaMap | None:
-    raw = _get(doc, "areas", "the document")
+def _build_areas(raw: dict[str, Any] | None, g: NavigationGraph) -> AreaMap | None:
     if raw is None:
         return None
-    a = _dict(raw, "areas")
-    next_id = _int(_get(a, "next_area_id", "areas"), "areas.next_area_id", 1)
     out: list[Area] = []
     seen: set[int] = set()
-    for i, r in enumerate(_list(_get(a, "areas", "areas"), "areas.areas")):
+    for i, d in enumerate(raw["areas"]):
         where = f"areas.areas[{i}]"
-        d = _dict(r, where)
-        aid = _int(_get(d, "id", where), f"{where}.id", 1)
-        nodes = frozenset(
-            _int(v, f"{where}.nodes[]") for v in _list(_get(d, "nodes", where), f"{where}.nodes")
-        )
+        nodes = frozenset(d["nodes"])
         bad = sorted(k for k in nodes if k not in g.nodes or g.nodes[k].kind != "place")
         if bad:
             raise _Bad(f"{where} holds {bad}, which are not place nodes of the graph")
         if nodes & seen:
             raise _Bad(f"{where} shares nodes {sorted(nodes & seen)} with another area")
         seen |= nodes
-        out.append(Area(aid, _str(_get(d, "label", where), f"{where}.label", optional=True), nodes))
+        out.append(Area(d["id"], d["label"], nodes))
     try:
-        return AreaMap.restore(out, next_id)
+        return AreaMap.restore(out, raw["next_area_id"])
     except ValueError as exc:
         raise _Bad(f"areas: {exc}") from exc

@@ -40,26 +40,20 @@ import numpy as np
 from knowledge.errors import ProtocolError
 from knowledge.labels import CLASS_COLORS_BGR, CLASS_NAMES, overlay
 from knowledge.metric.grid import OccupancyGrid
+from knowledge.schema import MessageSchema, Spec, array, integer, mapping, number, obj, string
 from knowledge.topology.regions import CorrectionThresholds, Merge, RegionGraph
 
 SCHEMA = "loci.topomap/1"
 
-_NODE_KEYS = (
-    "id",
-    "code",
-    "label",
-    "cells",
-    "area_m2",
-    "centroid",
-    "centroid_cell",
-    "major_axis",
-    "minor_axis",
-    "elongation",
-    "orientation_rad",
-    "bbox_cells",
-    "degree",
-)
-_EDGE_KEYS = ("source", "target", "border_m", "border_cells")
+
+def _graph_checks(doc: dict[str, Any]) -> str | None:
+    ids = {n["id"] for n in doc["nodes"]}
+    if len(ids) != len(doc["nodes"]):
+        return "node ids must be unique"
+    for i, e in enumerate(doc["edges"]):
+        if e["source"] not in ids or e["target"] not in ids:
+            return f"edge {i} joins unknown nodes {e['source']}–{e['target']}"
+    return None
 
 
 def _r(x: float, nd: int = 4) -> float:
@@ -169,33 +163,67 @@ def loads(text: str) -> dict[str, Any]:
     return validate_document(doc)
 
 
+_PAIR = array(number(), min_items=2, max_items=2)
+#: The one definition of the document's fields (:mod:`knowledge.schema`).
+DOCUMENT = MessageSchema(
+    "loci.topomap",
+    1,
+    obj(
+        {
+            "map": obj(
+                {
+                    "resolution": number(minimum=0),
+                    "origin": array(number(), min_items=3, max_items=3),
+                    "rows": integer(minimum=1),
+                    "cols": integer(minimum=1),
+                },
+                {"name": string(), "frame": string()},
+            ),
+            "nodes": array(
+                obj(
+                    {
+                        "id": integer(),
+                        "code": integer(minimum=0),
+                        "label": string(),
+                        "cells": integer(minimum=0),
+                        "area_m2": number(minimum=0),
+                        "centroid": _PAIR,
+                        "centroid_cell": _PAIR,
+                        "major_axis": _PAIR,
+                        "minor_axis": _PAIR,
+                        "elongation": number(),
+                        "orientation_rad": number(),
+                        "bbox_cells": array(integer(), min_items=4, max_items=4),
+                        "degree": integer(minimum=0),
+                    }
+                )
+            ),
+            "edges": array(
+                obj(
+                    {"source": integer(), "target": integer(), "border_m": number(), "border_cells": number()}
+                )
+            ),
+        },
+        {
+            "classes": mapping(string()),
+            "connectivity": integer(),
+            "thresholds": Spec("object", nullable=True, values=Spec("any", nullable=True)),
+            "corrections": array(mapping(Spec("any", nullable=True))),
+            "meta": mapping(Spec("any", nullable=True)),
+        },
+    ),
+    checks=(_graph_checks,),
+    description="the topological map of regions (loci places topology)",
+)
+
+
 def validate_document(doc: Any) -> dict[str, Any]:
     """Check a document's schema and structure; returns it. Raises :class:`ProtocolError`."""
     if not isinstance(doc, dict):
         raise ProtocolError("a topological map document must be a JSON object")
     if doc.get("schema") != SCHEMA:
         raise ProtocolError(f"expected schema {SCHEMA!r}, got {doc.get('schema')!r}")
-    for key in ("map", "nodes", "edges"):
-        if key not in doc:
-            raise ProtocolError(f"topological map is missing {key!r}")
-    m = doc["map"]
-    if not isinstance(m, dict) or not {"resolution", "origin", "rows", "cols"} <= set(m):
-        raise ProtocolError("'map' must hold resolution, origin, rows and cols")
-    if not isinstance(doc["nodes"], list) or not isinstance(doc["edges"], list):
-        raise ProtocolError("'nodes' and 'edges' must be lists")
-    ids = set()
-    for i, n in enumerate(doc["nodes"]):
-        if not isinstance(n, dict) or not set(_NODE_KEYS) <= set(n):
-            missing = sorted(set(_NODE_KEYS) - set(n)) if isinstance(n, dict) else list(_NODE_KEYS)
-            raise ProtocolError(f"node {i} lacks {missing}")
-        ids.add(n["id"])
-    if len(ids) != len(doc["nodes"]):
-        raise ProtocolError("node ids must be unique")
-    for i, e in enumerate(doc["edges"]):
-        if not isinstance(e, dict) or not set(_EDGE_KEYS) <= set(e):
-            raise ProtocolError(f"edge {i} must have {list(_EDGE_KEYS)}")
-        if e["source"] not in ids or e["target"] not in ids:
-            raise ProtocolError(f"edge {i} joins unknown nodes {e['source']}–{e['target']}")
+    DOCUMENT.validate(doc)
     return doc
 
 

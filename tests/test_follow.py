@@ -412,7 +412,10 @@ def test_closed_loop_follows_a_walker_down_a_corridor_and_loses_them_through_a_d
     assert robot.base.collisions == 0
     assert wrong_target == 0
     assert D[:, 1].min() >= 0.5  # never too close
-    assert D[walking, 1].max() <= 2.0  # keeps up while they walk at 0.5 m/s
+    # keeps up while they walk at 0.5 m/s. Measured 1.82 m before tracks needed evidence of
+    # motion to be confirmed, 2.13 m since: the walker is confirmed 0.6 s after setting off
+    # (0.2 m walked, docs/people.md) and the base, at 0.6 m/s, gains only 0.1 m/s on them
+    assert D[walking, 1].max() <= 2.25
     assert 0.5 <= D[standing, 1].max() <= 1.5  # ends near the standing person
     assert visible_until > t_leave + 1.0  # the person was seen walking away
     assert lost_at is not None and follow.state == "lost"

@@ -118,3 +118,44 @@ def test_config_is_checked() -> None:
         TrackerConfig(gate=0.0)
     with pytest.raises(ValueError, match="confirm_hits"):
         TrackerConfig(confirm_hits=0)
+    with pytest.raises(ValueError, match="confirm_evidence"):
+        TrackerConfig(confirm_evidence=4)  # more than confirm_hits
+    with pytest.raises(ValueError, match="confirm_travel"):
+        TrackerConfig(confirm_travel=0.0)
+
+
+def test_detections_that_may_not_give_birth_feed_only_confirmed_tracks() -> None:
+    tr = PeopleTracker(TrackerConfig(confirm_hits=3))
+    for k in range(5):  # furniture: never starts a track
+        assert tr.update([[1.0, 0.0]], k * DT, births=[False]) == []
+    assert tr.tracks(include_tentative=True) == []
+    for k in range(5, 8):  # a person walks in: born, confirmed after three scans
+        out = tr.update([[3.0, 0.1 * k]], k * DT, births=[True])
+    assert [t.id for t in out] == [1]
+    out = tr.update([[3.0, 0.8]], 8 * DT, births=[False])  # then stands on a "static" cell
+    assert out[0].misses == 0 and out[0].hits == 4
+    # a no-birth detection does not feed a tentative track either
+    tr2 = PeopleTracker(TrackerConfig(confirm_hits=2, tentative_misses=2))
+    tr2.update([[0.0, 0.0]], 0.0)
+    tr2.update([[0.0, 0.0]], DT, births=[False])
+    assert [t.hits for t in tr2.tracks(include_tentative=True)] == [1]
+    with pytest.raises(ValueError, match="one per detection"):
+        tr2.update([[0.0, 0.0]], 2 * DT, births=[True, False])
+
+
+def test_confirmation_waits_for_evidence_or_travel() -> None:
+    cfg = TrackerConfig(confirm_hits=3, confirm_evidence=2)
+    tr = PeopleTracker(cfg)
+    for k in range(6):  # hits without evidence: tentative for ever
+        assert tr.update([[1.0, 0.0]], k * DT, evidence=[False]) == []
+    assert tr.update([[1.0, 0.0]], 6 * DT, evidence=[True]) == []  # one piece of evidence
+    assert [t.id for t in tr.update([[1.0, 0.0]], 7 * DT, evidence=[True])] == [1]  # two
+    # or it walked confirm_travel metres from where it was born
+    tr = PeopleTracker(TrackerConfig(confirm_hits=3, confirm_evidence=3, confirm_travel=0.3))
+    out = []
+    for k in range(8):
+        out = tr.update([[0.0, 0.06 * k]], k * DT, evidence=[False])
+        if out:
+            break
+    assert out and out[0].travelled >= 0.3
+    assert k >= 5  # not before it had walked that far

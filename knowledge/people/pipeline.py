@@ -4,6 +4,14 @@
 tracker) so a caller — the agent's follow-me task, a replay, a benchmark — only hands it each
 scan with its time and, on a moving robot, the sensor's pose in a fixed frame (odometry), so
 people are tracked in that frame rather than in the moving sensor's.
+
+With the sensor's pose it also uses time to tell people from furniture that looks like legs
+(docs/people.md, "Tracks on a real benchmark"): a person detected where the laser has hit an
+obstacle for ``static.settle`` seconds (:class:`~knowledge.people.static.StaticCells`) may
+not start a track, and a new track is only confirmed once ``tracker.confirm_evidence`` of its
+detections stood where the laser saw through a moment before
+(:class:`~knowledge.people.freespace.SeenThrough`, ``min_seen_through`` scans): someone
+walked in. Without a pose (a sensor that does not move) neither rule applies.
 """
 
 from __future__ import annotations
@@ -16,13 +24,23 @@ import numpy as np
 import numpy.typing as npt
 
 from knowledge.people.detector import LegDetector, SegmentDetection
+from knowledge.people.freespace import SeenThrough, SeenThroughParams
 from knowledge.people.pairing import DEFAULT_MAX_DISTANCE, People, pair_legs
 from knowledge.people.segmentation import FloatArray
+from knowledge.people.static import StaticCells, StaticParams
 from knowledge.people.tracking import PeopleTracker, TrackerConfig, TrackState
 
 SCHEMA = "loci.people/1"
 #: Scans further apart than this (seconds) do not feed C.14 (a gap in the data).
 MAX_MOTION_GAP = 1.0
+#: The tracker of the pipeline: tentative tracks survive two missed scans, and are confirmed
+#: after three detections that stood where the laser saw through a moment before
+#: (docs/results/people_tracks.md has the measurements behind these values).
+DEFAULT_TRACKER = TrackerConfig(tentative_misses=3, confirm_evidence=3, confirm_travel=0.2)
+#: A person candidate on cells the laser has hit for this long starts no track.
+DEFAULT_STATIC = StaticParams(settle=2.0)
+#: Scans of the last two seconds that must have seen through a detection for it to be evidence.
+DEFAULT_MIN_SEEN_THROUGH = 3
 
 
 def to_frame(points: FloatArray, pose: tuple[float, float, float] | None) -> FloatArray:
@@ -85,7 +103,11 @@ class PeoplePipeline:
         detector: a fitted :class:`LegDetector` (default: the bundled model).
         pair_distance: largest distance between two legs of one person, metres.
         lone_legs: ``"person"`` or ``"drop"`` (see :mod:`knowledge.people.pairing`).
-        tracker: tracker parameters.
+        tracker: tracker parameters (default :data:`DEFAULT_TRACKER`).
+        static: how long an obstacle must have been hit to count as furniture (None: off).
+        seen_through: how free-space evidence is taken (see :mod:`knowledge.people.freespace`).
+        min_seen_through: a detection is evidence when at least this many recent scans saw
+            through it (0: every detection is).
     """
 
     def __init__(
@@ -95,12 +117,21 @@ class PeoplePipeline:
         pair_distance: float = DEFAULT_MAX_DISTANCE,
         lone_legs: str = "person",
         tracker: TrackerConfig | None = None,
+        static: StaticParams | None = DEFAULT_STATIC,
+        seen_through: SeenThroughParams | None = None,
+        min_seen_through: int = DEFAULT_MIN_SEEN_THROUGH,
     ) -> None:
+        if int(min_seen_through) != min_seen_through or min_seen_through < 0:
+            raise ValueError(f"min_seen_through must be an integer >= 0, got {min_seen_through!r}")
         self.detector = detector if detector is not None else LegDetector.load()
         self.pair_distance = pair_distance
         self.lone_legs = lone_legs
-        self.tracker = PeopleTracker(tracker)
+        self.tracker = PeopleTracker(tracker if tracker is not None else DEFAULT_TRACKER)
+        self.static = StaticCells(static) if static is not None else None
+        self.seen_through = SeenThrough(seen_through)
+        self.min_seen_through = int(min_seen_through)
         self._previous: tuple[float, npt.NDArray[np.float64]] | None = None
+        self._angles: tuple[tuple[int, float, float], FloatArray, FloatArray] | None = None
 
     def process(
         self,
@@ -133,8 +164,49 @@ class PeoplePipeline:
         self._previous = (float(stamp), r)
         legs = to_frame(det.legs, sensor_pose)
         people = pair_legs(legs, max_distance=self.pair_distance, lone_legs=self.lone_legs)
-        tracks = self.tracker.update(people.positions, float(stamp))
+        evidence = births = None
+        if sensor_pose is not None:
+            pos = people.positions
+            if self.static is not None:
+                self.static.update(
+                    self._endpoints(r, sensor_pose, angle_min, angle_increment, range_max, range_min), stamp
+                )
+                births = ~self.static.static(pos) if pos.shape[0] else None
+            if self.min_seen_through > 0:
+                self.seen_through.add(
+                    r,
+                    float(stamp),
+                    sensor_pose,
+                    angle_min=angle_min,
+                    angle_increment=angle_increment,
+                    range_max=range_max,
+                    range_min=range_min,
+                )
+                evidence = self.seen_through.evidence(pos, float(stamp)) >= self.min_seen_through
+        tracks = self.tracker.update(people.positions, float(stamp), evidence=evidence, births=births)
         return PeopleFrame(float(stamp), det, legs, people, tracks)
+
+    def _endpoints(
+        self,
+        r: FloatArray,
+        pose: tuple[float, float, float],
+        angle_min: float,
+        angle_increment: float,
+        range_max: float,
+        range_min: float,
+    ) -> FloatArray:
+        """``(k, 2)`` the scan's hits in the tracking frame."""
+        key = (r.size, float(angle_min), float(angle_increment))
+        if self._angles is None or self._angles[0] != key:
+            a = angle_min + np.arange(r.size) * angle_increment
+            self._angles = (key, np.cos(a), np.sin(a))
+        _, c, s = self._angles
+        with np.errstate(invalid="ignore"):
+            ok = np.isfinite(r) & (r > 0) & (r >= range_min) & (r < range_max)
+        x, y, th = pose
+        ct, st = math.cos(th), math.sin(th)
+        lx, ly = r[ok] * c[ok], r[ok] * s[ok]
+        return np.column_stack([x + ct * lx - st * ly, y + st * lx + ct * ly])
 
     def process_scan(self, scan: Any, sensor_pose: tuple[float, float, float] | None = None) -> PeopleFrame:
         """:meth:`process` for a :class:`drivers.messages.LaserScan` (duck-typed: ``ranges``,

@@ -20,8 +20,15 @@ Each scan (:meth:`PeopleTracker.update`):
 3. associated tracks are corrected with their detection (Kalman update);
 4. births: every detection left over starts a *tentative* track (velocity 0, uncertain by
    ``init_speed_std``). It becomes *confirmed* — and only then gets its id and is reported —
-   after ``confirm_hits`` associated scans; a tentative track that misses ``tentative_misses``
-   scans in a row is dropped;
+   after ``confirm_hits`` associated scans, of which at least ``confirm_evidence`` had
+   *evidence* (the caller says which detections have it: e.g. the laser saw through that
+   place a moment before, :mod:`knowledge.people.freespace`, so someone walked in), or once
+   it has moved ``confirm_travel`` metres from where it was born (someone walking away from
+   the laser hides their own next position, so the laser never sees through it); a
+   tentative track that misses ``tentative_misses`` scans in a row is dropped. Detections
+   the caller marks as no *birth* (e.g. on cells the laser has hit for seconds: furniture,
+   :mod:`knowledge.people.static`) may feed confirmed tracks — a person who walked up and
+   stands still stays tracked — but neither start nor feed tentative ones;
 5. deaths: a confirmed track that misses more than ``max_misses`` scans in a row is deleted.
    While it misses it coasts on its prediction (``misses > 0`` in its state).
 
@@ -51,6 +58,8 @@ class TrackerConfig:
     accel_std: float = 2.0
     meas_std: float = 0.08
     init_speed_std: float = 1.0
+    confirm_evidence: int = 0
+    confirm_travel: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("gate", "accel_std", "meas_std", "init_speed_std"):
@@ -61,6 +70,17 @@ class TrackerConfig:
             v = getattr(self, name)
             if int(v) != v or v < 1:
                 raise ValueError(f"TrackerConfig.{name} must be an integer >= 1, got {v!r}")
+        if self.confirm_travel is not None and not (
+            math.isfinite(self.confirm_travel) and self.confirm_travel > 0
+        ):
+            raise ValueError(
+                f"TrackerConfig.confirm_travel must be None or a positive number, got {self.confirm_travel!r}"
+            )
+        v = self.confirm_evidence
+        if int(v) != v or not 0 <= v <= self.confirm_hits:
+            raise ValueError(
+                f"TrackerConfig.confirm_evidence must be an integer in 0..confirm_hits, got {v!r}"
+            )
 
 
 def cv_transition(dt: float) -> FloatArray:
@@ -158,6 +178,7 @@ class _Track:
     x0: float = 0.0  # where it was born
     y0: float = 0.0
     travelled: float = 0.0  # the farthest the corrected position has been from (x0, y0)
+    evidence: int = 0  # associated detections that had evidence (while tentative)
 
     def predict(self, dt: float, q00: float, q01: float, q11: float) -> None:
         """:func:`kalman_predict` over ``dt`` seconds with process noise ``[[q00, q01], [q01, q11]]`` per axis."""
@@ -287,8 +308,20 @@ class PeopleTracker:
             self._noise = (key, float(Q[0, 0]), float(Q[0, 2]), float(Q[2, 2]))
         return self._noise[1:]
 
-    def update(self, detections: npt.ArrayLike, t: float) -> list[TrackState]:
-        """Advance to time ``t`` (seconds) with person positions ``(K, 2)``; returns the confirmed tracks."""
+    def update(
+        self,
+        detections: npt.ArrayLike,
+        t: float,
+        *,
+        evidence: npt.ArrayLike | None = None,
+        births: npt.ArrayLike | None = None,
+    ) -> list[TrackState]:
+        """Advance to time ``t`` (seconds) with person positions ``(K, 2)``; returns the confirmed tracks.
+
+        ``evidence`` ``(K,)`` bool: the detections that count towards ``confirm_evidence``
+        (None: all). ``births`` ``(K,)`` bool: the detections that may start or feed a
+        tentative track (None: all); the others can only feed confirmed tracks.
+        """
         Z = (
             np.asarray(detections, dtype=np.float64).reshape(-1, 2)
             if np.size(detections)
@@ -296,6 +329,11 @@ class PeopleTracker:
         )
         if not np.isfinite(Z).all():
             raise ValueError("detections must be finite (K, 2) positions in metres")
+        K0 = Z.shape[0]
+        ev = np.ones(K0, dtype=bool) if evidence is None else np.asarray(evidence, dtype=bool).reshape(-1)
+        may = np.ones(K0, dtype=bool) if births is None else np.asarray(births, dtype=bool).reshape(-1)
+        if ev.shape != (K0,) or may.shape != (K0,):
+            raise ValueError(f"evidence and births must be ({K0},) bool, one per detection")
         if not math.isfinite(t):
             raise ValueError(f"t must be a finite time in seconds, got {t!r}")
         cfg = self.config
@@ -319,7 +357,9 @@ class PeopleTracker:
             group = [tr for tr in self._tracks if (tr.id > 0) == confirmed]
             if not group:
                 continue
-            cand = [k for k in range(K) if free[k]]
+            cand = [k for k in range(K) if free[k] and (confirmed or may[k])]
+            if not cand:
+                continue
             dist = [[math.hypot(tr.px - zs[k][0], tr.py - zs[k][1]) for k in cand] for tr in group]
             for row, col in _assign(dist, cfg.gate):
                 tr = group[row]
@@ -327,6 +367,7 @@ class PeopleTracker:
                 tr.correct(zs[k][0], zs[k][1], r)
                 tr.travelled = max(tr.travelled, math.hypot(tr.px - tr.x0, tr.py - tr.y0))
                 tr.hits += 1
+                tr.evidence += int(ev[k])
                 tr.misses = 0
                 tr.last_seen = t
                 free[k] = False
@@ -341,7 +382,10 @@ class PeopleTracker:
                 if tr.misses <= cfg.max_misses:
                     survivors.append(tr)
             elif tr.misses < cfg.tentative_misses:
-                if tr.hits >= cfg.confirm_hits:
+                if tr.hits >= cfg.confirm_hits and (
+                    tr.evidence >= cfg.confirm_evidence
+                    or (cfg.confirm_travel is not None and tr.travelled >= cfg.confirm_travel)
+                ):
                     tr.id = self._next_id
                     self._next_id += 1
                 survivors.append(tr)
@@ -349,11 +393,12 @@ class PeopleTracker:
             p0 = cfg.meas_std**2
             v0 = cfg.init_speed_std**2
             for k in range(K):
-                if not free[k]:
+                if not (free[k] and may[k]):
                     continue
                 x, y = zs[k]
                 tr = _Track(x, y, 0.0, 0.0, p0, 0.0, v0, p0, 0.0, v0, born=t, last_seen=t, x0=x, y0=y)
-                if cfg.confirm_hits <= 1:
+                tr.evidence = int(ev[k])
+                if cfg.confirm_hits <= 1 and tr.evidence >= cfg.confirm_evidence:
                     tr.id = self._next_id
                     self._next_id += 1
                 survivors.append(tr)

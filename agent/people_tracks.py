@@ -40,7 +40,9 @@ __all__ = [
     "TrackFrame",
     "TrackRun",
     "TrackScores",
+    "bag_examples",
     "read_annotations",
+    "read_bag_scans",
     "read_tracks",
     "score_tracks",
     "track_recording",
@@ -474,3 +476,97 @@ def score_tracks(
         annotated_scans_missing=len(annotated - set(by_stamp)),
         window=window,
     )
+
+
+def read_bag_scans(path: str | Path, *, scan_topic: str | None = None) -> list[Any]:
+    """The LaserScans of a ROS 1 bag as :class:`~drivers.messages.LaserScan` (REP 117 ranges
+    converted as ``loci import`` does), in bag order.
+
+    Raises:
+        DataError: the bag does not open, the scan topic is ambiguous or missing, or a scan
+            does not deserialize or has impossible values (its number is named).
+    """
+    from rosbags.rosbag1 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    from agent.recording.rosbag import BadMessage, scan_from_ros
+
+    src = Path(path)
+    try:
+        reader = Reader(src)
+        reader.open()
+    except Exception as exc:  # rosbags raises its own errors, and OSError, on damage
+        raise DataError(f"{src}: cannot open as a ROS 1 bag: {exc}") from exc
+    try:
+        conns = {c.topic: c for c in reader.connections}
+        scans = sorted(t for t, c in conns.items() if c.msgtype == "sensor_msgs/msg/LaserScan")
+        if scan_topic is None:
+            if len(scans) != 1:
+                raise DataError(
+                    f"{src}: choose the scan topic (LaserScan topics: {', '.join(scans) or 'none'})"
+                )
+            scan_topic = scans[0]
+        elif scan_topic not in scans:
+            raise DataError(
+                f"{src}: {scan_topic} is not a LaserScan topic (those: {', '.join(scans) or 'none'})"
+            )
+        store = get_typestore(Stores.ROS1_NOETIC)
+        out = []
+        for n, (conn, _, raw) in enumerate(reader.messages(connections=[conns[scan_topic]]), start=1):
+            try:
+                out.append(scan_from_ros(store.deserialize_ros1(raw, conn.msgtype), n))
+            except BadMessage as exc:
+                raise DataError(f"{src}: scan {n} on {scan_topic}: {exc}") from exc
+            except Exception as exc:
+                raise DataError(f"{src}: scan {n} on {scan_topic} does not deserialize: {exc}") from exc
+    finally:
+        reader.close()
+    return out
+
+
+def bag_examples(
+    path: str | Path,
+    *,
+    window: tuple[float, float] = (-math.inf, math.inf),
+    arc_deg: tuple[float, float] | None = BENCHMARK_ARC,
+    jump: float = 0.15,
+    max_gap: int | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, int]]:
+    """Labelled segments of an annotated benchmark bag for training the leg detector:
+    ``(X (n, 14), y (n,) bool, distance (n,), counts)``, from the scans ``window`` seconds
+    after its first scan (:func:`knowledge.people.dataset.label_person_annotations`: legs
+    near an annotated person are people, segments in the arc far from everyone are not).
+    """
+    from knowledge.people.dataset import POSITIVE, label_person_annotations
+    from knowledge.people.features import _features
+    from knowledge.people.segmentation import segment_scan
+
+    truth = read_annotations(path)
+    scans = read_bag_scans(path)
+    t0 = float(truth.scan_stamps[0]) if truth.scan_stamps.size else 0.0
+    Xs, ys, ds = [], [], []
+    used = 0
+    for scan in scans:
+        if not (window[0] <= scan.stamp - t0 < window[1]):
+            continue
+        used += 1
+        seg = segment_scan(
+            scan.ranges,
+            scan.angle_min,
+            scan.angle_increment,
+            range_max=scan.range_max,
+            range_min=scan.range_min,
+            jump=jump,
+            max_gap=max_gap,
+        )
+        X, centre = _features(seg, range_max=scan.range_max, range_min=scan.range_min)
+        _, people = truth.at(scan.stamp)
+        labels = label_person_annotations(X, centre, people, arc_deg=arc_deg)
+        keep = labels >= 0
+        Xs.append(X[keep])
+        ys.append(labels[keep] == POSITIVE)
+        ds.append(np.hypot(centre[keep, 0], centre[keep, 1]))
+    if not Xs:
+        raise DataError(f"{path}: no scan in the window {window[0]:g}-{window[1]:g} s after the first scan")
+    X, y, dist = np.concatenate(Xs), np.concatenate(ys), np.concatenate(ds)
+    return X, y, dist, {"scans": used, "people": int(y.sum()), "non_people": int((~y).sum())}

@@ -83,3 +83,18 @@ def test_params_are_checked() -> None:
         SeenThroughParams(min_lag=3.0)
     with pytest.raises(ValueError, match="max_scans"):
         SeenThroughParams(max_scans=0)
+
+
+def test_hidden_behind_says_what_something_nearer_hides() -> None:
+    from knowledge.people.pipeline import hidden_behind
+
+    r = wall_scan(post=(1.5, 0.0))  # a post 1.5 m ahead, the wall at 4 m
+    pose = (0.0, 0.0, 0.0)
+    pts = np.array([[3.0, 0.0], [1.6, 0.0], [3.0, 1.5], [-2.0, 0.0]])
+    # behind the post; just behind it (within the 0.3 m margin); in the open; behind the laser
+    assert hidden_behind(pts, r, pose, AMIN, INC, 11.0).tolist() == [True, False, False, False]
+    # the same scan taken by a laser at another pose, the points given in the tracking frame
+    moved = (1.0, -1.0, math.pi / 2)
+    c, s = math.cos(moved[2]), math.sin(moved[2])
+    world = np.array([[moved[0] + c * x - s * y, moved[1] + s * x + c * y] for x, y in pts])
+    assert hidden_behind(world, r, moved, AMIN, INC, 11.0).tolist() == [True, False, False, False]

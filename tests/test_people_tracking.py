@@ -159,3 +159,29 @@ def test_confirmation_waits_for_evidence_or_travel() -> None:
             break
     assert out and out[0].travelled >= 0.3
     assert k >= 5  # not before it had walked that far
+
+
+def test_a_hidden_track_coasts_up_to_max_occluded_seconds() -> None:
+    cfg = TrackerConfig(confirm_hits=2, max_misses=2, max_occluded=1.05)
+    for hidden, survives in ((True, 10), (False, 2)):
+        tr = PeopleTracker(cfg)
+        tr.update([[2.0, 0.0]], 0.0)
+        assert [t.id for t in tr.update([[2.0, 0.0]], DT)] == [1]
+        n = 0
+        for k in range(2, 30):  # nobody seen from now on
+            out = tr.update([], k * DT, occluded=lambda p, h=hidden: np.full(len(p), h))
+            if not out:
+                break
+            n += 1
+        # hidden: coasts while t - last_seen <= 1.05 s (10 scans); in plain view: max_misses scans
+        assert n == survives
+    # a detection after the occlusion takes the track up again, with its id
+    tr = PeopleTracker(cfg)
+    tr.update([[2.0, 0.0]], 0.0)
+    tr.update([[2.0, 0.0]], DT)
+    for k in range(2, 8):
+        tr.update([], k * DT, occluded=lambda p: np.ones(len(p), dtype=bool))
+    out = tr.update([[2.05, 0.0]], 8 * DT)
+    assert [(t.id, t.misses) for t in out] == [(1, 0)]
+    with pytest.raises(ValueError, match="max_occluded"):
+        TrackerConfig(max_occluded=-1.0)

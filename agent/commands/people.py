@@ -109,6 +109,29 @@ def register(subparsers: Any) -> None:
         help="decision threshold on F: 'sign' (F >= 0, the book's; default) or 'train-cv' (the one that "
         "minimises max(FN, FP) in a 4-fold cross-validation on the TRAIN split; the test split is never used)",
     )
+    tr.add_argument(
+        "--bag",
+        type=Path,
+        metavar="BAG",
+        help="also train on the people annotated in a leg_tracker benchmark bag (legs near an annotated "
+        "person are people, segments in the -80..12 degree arc far from everyone are not)",
+    )
+    tr.add_argument(
+        "--bag-window",
+        type=float,
+        nargs=2,
+        metavar=("START", "END"),
+        default=(-math.inf, math.inf),
+        help="only the bag's scans from START to END seconds after its first scan (keep the part you "
+        "score on out: e.g. --bag-window 36 1000 to score on the first 36 s)",
+    )
+    tr.add_argument(
+        "--bag-weight",
+        type=positive_float,
+        default=1.0,
+        metavar="W",
+        help="initial weight of the bag's segments relative to the legs data's, within each class (default: 1)",
+    )
     tr.set_defaults(handler=_train)
 
     ev = sub.add_parser(
@@ -218,10 +241,22 @@ def _examples(args: argparse.Namespace, split: str, jump: float, max_gap: int | 
 
 
 def _train(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from knowledge.people.detector import LegDetector
     from knowledge.people.features import DEFAULT_COLUMNS, FEATURE_CODES, JUMP_COLUMNS, MOTION_COLUMN
 
     _, ex = _examples(args, "train", args.jump)
+    X, y, weight = ex.X, ex.y, None
+    bag_counts: dict[str, Any] | None = None
+    if args.bag is not None:
+        from agent.people_tracks import bag_examples
+
+        window = (float(args.bag_window[0]), float(args.bag_window[1]))
+        Xb, yb, _, counts = bag_examples(args.bag, window=window, jump=args.jump)
+        X, y = np.concatenate([ex.X, Xb]), np.concatenate([ex.y, yb])
+        weight = np.concatenate([np.ones(ex.y.size), np.full(yb.size, args.bag_weight)])
+        bag_counts = {"bag": str(args.bag), "window_s": list(window), "weight": args.bag_weight, **counts}
     if ex.n_positive == 0 or ex.n_negative == 0:
         print(
             f"loci: error: the TRAIN split gave {ex.n_positive} people and {ex.n_negative} non-people segments; "
@@ -247,8 +282,15 @@ def _train(args: argparse.Namespace) -> int:
         + (f" --jump {args.jump:g}" if args.jump != 0.15 else "")
         + (f" --max-range {args.max_range:g}" if args.max_range != 5.0 else "")
         + (f" --max-scans {args.max_scans}" if args.max_scans else "")
-        + (f" --threshold {args.threshold}" if args.threshold != "sign" else ""),
+        + (f" --threshold {args.threshold}" if args.threshold != "sign" else "")
+        + (
+            f" --bag {args.bag} --bag-window {args.bag_window[0]:g} {args.bag_window[1]:g} --bag-weight {args.bag_weight:g}"
+            if args.bag is not None
+            else ""
+        ),
     }
+    if bag_counts is not None:
+        training["bag"] = bag_counts
 
     def make(threshold: float = 0.0) -> LegDetector:
         return LegDetector(
@@ -275,7 +317,7 @@ def _train(args: argparse.Namespace) -> int:
             "false_negative_rate_pct": choice.false_negative_rate_pct,
             "false_positive_rate_pct": choice.false_positive_rate_pct,
         }
-    det = make(threshold).fit(ex.X, ex.y, training=training)
+    det = make(threshold).fit(X, y, training=training, sample_weight=weight)
     seconds = time.perf_counter() - t0
     path = det.save(args.out)
     summary = {
@@ -288,6 +330,7 @@ def _train(args: argparse.Namespace) -> int:
         "fit_seconds": seconds,
         "top_features": det.top_features(5),
         "threshold": det.threshold,
+        "bag": bag_counts,
     }
     if args.json:
         print(json.dumps(summary, indent=None, sort_keys=True))
@@ -297,6 +340,11 @@ def _train(args: argparse.Namespace) -> int:
             f"({ex.diagnostics['scans']} scans) in {seconds:.1f} s; "
             f"{summary['rounds']} weak learners, training error {summary['train_error_pct']:.2f}%"
         )
+        if bag_counts is not None:
+            print(
+                f"  and on {bag_counts['people']} people and {bag_counts['non_people']} non-people segments of "
+                f"{bag_counts['scans']} scans of {args.bag} (weight {args.bag_weight:g})"
+            )
         print(
             "most important features: "
             + ", ".join(f"{f['code']} {f['name']}" for f in summary["top_features"])

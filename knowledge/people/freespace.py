@@ -19,6 +19,7 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import numpy.typing as npt
 
@@ -84,7 +85,7 @@ class SeenThrough:
         range_max: float,
         range_min: float = 0.0,
     ) -> None:
-        """Remember a scan (after :meth:`evidence` was asked about its points)."""
+        """Remember a scan and forget those older than ``horizon``."""
         orig = np.asarray(ranges, dtype=np.float64)
         r = orig.copy()
         with np.errstate(invalid="ignore"):
@@ -96,34 +97,11 @@ class SeenThrough:
         while self._scans and self._scans[0].stamp < stamp - self.params.horizon:
             self._scans.popleft()
 
-    def _window(
-        self, s: _Scan, q: npt.NDArray[np.float64]
-    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-        """For points ``q`` ``(K, 2)`` seen from scan ``s``: their distances ``(K,)`` and the
-        ranges of the beams within ``half_width`` of each ``(K, M)`` (NaN where a beam of the
-        window is outside the scan or invalid; ``+inf`` where there is no window to look at)."""
-        prm = self.params
-        x, y, th = s.pose
-        dx, dy = q[:, 0] - x, q[:, 1] - y
-        d = np.hypot(dx, dy)
-        b = np.arctan2(dy, dx) - th
-        b = np.arctan2(np.sin(b), np.cos(b))
-        centre = np.rint((b - s.angle_min) / s.angle_increment).astype(np.int64)
-        w = np.ceil(prm.half_width / (np.maximum(d, 0.05) * s.angle_increment)).astype(np.int64)
-        W = int(w.max())
-        off = np.arange(-W, W + 1)
-        idx = centre[:, None] + off[None, :]
-        n = s.ranges.size
-        r = s.ranges[np.clip(idx, 0, n - 1)].copy()
-        r[(idx < 0) | (idx >= n)] = np.nan
-        r[np.abs(off)[None, :] > w[:, None]] = np.inf  # outside the window: no constraint
-        return d, r
-
     def evidence(self, points: npt.ArrayLike, stamp: float) -> npt.NDArray[np.int64]:
         """``(K,)`` for each point, how many remembered scans ``min_lag``–``horizon`` s before
         ``stamp`` saw through it."""
         prm = self.params
-        q = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        q = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 2))
         out = np.zeros(q.shape[0], dtype=np.int64)
         if not q.shape[0]:
             return out
@@ -131,8 +109,53 @@ class SeenThrough:
         if len(old) > prm.max_scans:
             pick = np.linspace(0, len(old) - 1, prm.max_scans).round().astype(int)
             old = [old[i] for i in pick]
-        for s in old:
-            d, r = self._window(s, q)
-            with np.errstate(invalid="ignore"):
-                out += (r > (d + prm.margin)[:, None]).all(axis=1)
+        for s in old:  # scans of one laser: the same beams, in practice one kernel call
+            _count_seen_through(
+                q,
+                s.ranges,
+                s.pose[0],
+                s.pose[1],
+                s.pose[2],
+                s.angle_min,
+                s.angle_increment,
+                prm.margin,
+                prm.half_width,
+                out,
+            )
         return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _count_seen_through(
+    q: np.ndarray,
+    ranges: np.ndarray,
+    x: float,
+    y: float,
+    th: float,
+    angle_min: float,
+    inc: float,
+    margin: float,
+    half_width: float,
+    out: np.ndarray,
+) -> None:
+    """``out[k] += 1`` for each point ``q[k]`` that every beam of the scan within
+    ``half_width`` metres of it (at its distance) passed by ``margin`` metres (no return:
+    ``+inf``; invalid: NaN, which never passes; a window reaching past the scan's ends fails)."""
+    n = ranges.shape[0]
+    for k in range(q.shape[0]):
+        dx = q[k, 0] - x
+        dy = q[k, 1] - y
+        d = math.hypot(dx, dy)
+        b = math.atan2(dy, dx) - th
+        b = math.atan2(math.sin(b), math.cos(b))
+        centre = int(np.rint((b - angle_min) / inc))
+        w = math.ceil(half_width / (max(d, 0.05) * inc))
+        if centre - w < 0 or centre + w >= n:
+            continue
+        ok = True
+        for i in range(centre - w, centre + w + 1):
+            if not ranges[i] > d + margin:  # NaN fails too
+                ok = False
+                break
+        if ok:
+            out[k] += 1

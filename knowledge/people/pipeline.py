@@ -34,9 +34,10 @@ SCHEMA = "loci.people/1"
 #: Scans further apart than this (seconds) do not feed C.14 (a gap in the data).
 MAX_MOTION_GAP = 1.0
 #: The tracker of the pipeline: tentative tracks survive two missed scans, and are confirmed
-#: after three detections that stood where the laser saw through a moment before
+#: after three detections that stood where the laser saw through a moment before, or once they
+#: walked 0.2 m; a confirmed track hidden behind something nearer coasts for up to 2 s
 #: (docs/results/people_tracks.md has the measurements behind these values).
-DEFAULT_TRACKER = TrackerConfig(tentative_misses=3, confirm_evidence=3, confirm_travel=0.2)
+DEFAULT_TRACKER = TrackerConfig(tentative_misses=3, confirm_evidence=3, confirm_travel=0.2, max_occluded=2.0)
 #: A person candidate on cells the laser has hit for this long starts no track.
 DEFAULT_STATIC = StaticParams(settle=2.0)
 #: Scans of the last two seconds that must have seen through a detection for it to be evidence.
@@ -94,6 +95,45 @@ class PeopleFrame:
                 for t in self.tracks
             ],
         }
+
+
+#: Metres something must stand in front of a tracked person for the person to count as hidden.
+OCCLUSION_MARGIN = 0.3
+#: Metres to either side of the person whose beams are looked at.
+OCCLUSION_HALF_WIDTH = 0.15
+
+
+def hidden_behind(
+    points: FloatArray,
+    ranges: FloatArray,
+    pose: tuple[float, float, float],
+    angle_min: float,
+    angle_increment: float,
+    range_max: float,
+    range_min: float = 0.0,
+) -> npt.NDArray[np.bool_]:
+    """``(K,)`` bool: a beam of the scan ``ranges`` (taken from ``pose``, tracking frame)
+    within :data:`OCCLUSION_HALF_WIDTH` of each point ``(K, 2)`` ended at least
+    :data:`OCCLUSION_MARGIN` in front of it: something nearer hides it. Points outside the
+    field of view are not hidden (they are out of sight)."""
+    q = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    out = np.zeros(q.shape[0], dtype=bool)
+    n = ranges.shape[0]
+    x, y, th = pose
+    for k in range(q.shape[0]):
+        dx, dy = q[k, 0] - x, q[k, 1] - y
+        d = math.hypot(dx, dy)
+        b = math.atan2(math.sin(math.atan2(dy, dx) - th), math.cos(math.atan2(dy, dx) - th))
+        centre = round((b - angle_min) / angle_increment)
+        w = math.ceil(OCCLUSION_HALF_WIDTH / (max(d, 0.05) * angle_increment))
+        lo, hi = max(0, centre - w), min(n, centre + w + 1)
+        if centre < 0 or centre >= n or lo >= hi:
+            continue
+        r = ranges[lo:hi]
+        with np.errstate(invalid="ignore"):
+            valid = np.isfinite(r) & (r > 0) & (r >= range_min) & (r < range_max)
+        out[k] = bool((valid & (r < d - OCCLUSION_MARGIN)).any())
+    return out
 
 
 class PeoplePipeline:
@@ -183,7 +223,16 @@ class PeoplePipeline:
                     range_min=range_min,
                 )
                 evidence = self.seen_through.evidence(pos, float(stamp)) >= self.min_seen_through
-        tracks = self.tracker.update(people.positions, float(stamp), evidence=evidence, births=births)
+        occluded = None
+        if sensor_pose is not None:
+            pose = sensor_pose
+
+            def occluded(points: FloatArray) -> npt.NDArray[np.bool_]:
+                return hidden_behind(points, r, pose, angle_min, angle_increment, range_max, range_min)
+
+        tracks = self.tracker.update(
+            people.positions, float(stamp), evidence=evidence, births=births, occluded=occluded
+        )
         return PeopleFrame(float(stamp), det, legs, people, tracks)
 
     def _endpoints(

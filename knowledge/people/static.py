@@ -54,19 +54,27 @@ def _keys(ij: np.ndarray) -> np.ndarray:
     return (ij[:, 0].astype(np.int64) << 32) | (ij[:, 1].astype(np.int64) & 0xFFFFFFFF)
 
 
+#: Side of the table of cells (cells): a cell lives at (i mod SIZE, j mod SIZE), so two cells
+#: share a slot only when they are SIZE cells apart (51 m at 10 cm); the slot keeps the one
+#: hit last, and a cell whose slot holds another cell counts as never hit.
+SIZE = 512
+_EMPTY = np.iinfo(np.int64).min
+
+
 class StaticCells:
-    """The first and last hit time of each cell (see the module docstring); bounded by
-    ``forget``: cells not hit for that long are dropped."""
+    """The first and last hit time of each cell (see the module docstring), in a fixed table:
+    constant memory, no sorting; cells not hit for ``forget`` seconds are forgotten."""
 
     def __init__(self, params: StaticParams | None = None) -> None:
         self.params = params or StaticParams()
-        self._keys = np.zeros(0, dtype=np.int64)  # sorted
-        self._first = np.zeros(0, dtype=np.float64)
-        self._last = np.zeros(0, dtype=np.float64)
+        self._key = np.full((SIZE, SIZE), _EMPTY, dtype=np.int64)
+        self._first = np.zeros((SIZE, SIZE), dtype=np.float64)
+        self._last = np.full((SIZE, SIZE), -np.inf, dtype=np.float64)
         self._time = -math.inf
 
     def __len__(self) -> int:
-        return int(self._keys.size)
+        """Cells hit within the last ``forget`` seconds."""
+        return int(np.count_nonzero(self._last >= self._time - self.params.forget))
 
     def update(self, points: np.ndarray, stamp: float) -> None:
         """The scan at ``stamp`` hit ``points`` (``(k, 2)`` metres, tracking frame)."""
@@ -74,21 +82,14 @@ class StaticCells:
         t = float(stamp)
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
         pts = pts[np.isfinite(pts).all(axis=1)]
-        keys = np.unique(_keys(np.floor(pts / prm.cell)))
-        alive = self._last >= t - prm.forget
-        k, first, last = self._keys[alive], self._first[alive], self._last[alive]
-        i = np.searchsorted(k, keys).clip(0, max(k.size - 1, 0))
-        known = (k.size > 0) & (k[i] == keys) if k.size else np.zeros(keys.size, dtype=bool)
-        last = last.copy()
-        last[i[known]] = t
-        new = keys[~known]
-        if new.size:
-            k = np.concatenate((k, new))
-            first = np.concatenate((first, np.full(new.size, t)))
-            last = np.concatenate((last, np.full(new.size, t)))
-            order = np.argsort(k, kind="stable")
-            k, first, last = k[order], first[order], last[order]
-        self._keys, self._first, self._last = k, first, last
+        ij = np.floor(pts / prm.cell).astype(np.int64)
+        keys = _keys(ij)
+        a, b = ij[:, 0] % SIZE, ij[:, 1] % SIZE
+        same = (self._key[a, b] == keys) & (self._last[a, b] >= t - prm.forget)
+        # a cell hit twice in one scan gets the same values from both writes
+        self._first[a, b] = np.where(same, self._first[a, b], t)
+        self._last[a, b] = t
+        self._key[a, b] = keys
         self._time = t
 
     def static(self, points: np.ndarray) -> np.ndarray:
@@ -96,15 +97,16 @@ class StaticCells:
         longer than ``forget``, for ``settle`` seconds up to the last update."""
         prm = self.params
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        out = np.zeros(pts.shape[0], dtype=bool)
-        if not self._keys.size or not pts.shape[0]:
-            return out
-        settled = (self._time - self._first >= prm.settle) & (self._last >= self._time - prm.forget)
+        if not pts.shape[0] or self._time == -math.inf:
+            return np.zeros(pts.shape[0], dtype=bool)
         r = math.ceil(prm.reach / prm.cell)
-        base = np.floor(pts / prm.cell).astype(np.int64)
-        for di in range(-r, r + 1):
-            for dj in range(-r, r + 1):
-                keys = _keys(base + np.array([di, dj], dtype=np.int64))
-                i = np.searchsorted(self._keys, keys).clip(0, self._keys.size - 1)
-                out |= (self._keys[i] == keys) & settled[i]
-        return out
+        span = np.arange(-r, r + 1, dtype=np.int64)
+        offsets = np.stack(np.meshgrid(span, span, indexing="ij"), axis=-1).reshape(-1, 2)
+        ij = (np.floor(pts / prm.cell).astype(np.int64)[:, None, :] + offsets[None, :, :]).reshape(-1, 2)
+        a, b = ij[:, 0] % SIZE, ij[:, 1] % SIZE
+        hit = (
+            (self._key[a, b] == _keys(ij))
+            & (self._time - self._first[a, b] >= prm.settle)
+            & (self._last[a, b] >= self._time - prm.forget)
+        )
+        return np.asarray(hit.reshape(pts.shape[0], -1).any(axis=1))

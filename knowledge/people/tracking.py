@@ -30,7 +30,11 @@ Each scan (:meth:`PeopleTracker.update`):
    :mod:`knowledge.people.static`) may feed confirmed tracks — a person who walked up and
    stands still stays tracked — but neither start nor feed tentative ones;
 5. deaths: a confirmed track that misses more than ``max_misses`` scans in a row is deleted.
-   While it misses it coasts on its prediction (``misses > 0`` in its state).
+   While it misses it coasts on its prediction (``misses > 0`` in its state). Misses while
+   the caller says the predicted position is *occluded* (something nearer on the laser's
+   beam towards it: a passer-by, a door jamb the person turned round) do not count, for at
+   most ``max_occluded`` seconds since it was last seen: a person hidden for a moment keeps
+   their track (and follow-me its target).
 
 Ids are integers from 1, given in order of confirmation, never reused by one tracker.
 """
@@ -38,6 +42,7 @@ Ids are integers from 1, given in order of confirmation, never reused by one tra
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,6 +65,7 @@ class TrackerConfig:
     init_speed_std: float = 1.0
     confirm_evidence: int = 0
     confirm_travel: float | None = None
+    max_occluded: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("gate", "accel_std", "meas_std", "init_speed_std"):
@@ -75,6 +81,10 @@ class TrackerConfig:
         ):
             raise ValueError(
                 f"TrackerConfig.confirm_travel must be None or a positive number, got {self.confirm_travel!r}"
+            )
+        if not (math.isfinite(self.max_occluded) and self.max_occluded >= 0):
+            raise ValueError(
+                f"TrackerConfig.max_occluded must be a number of seconds >= 0, got {self.max_occluded!r}"
             )
         v = self.confirm_evidence
         if int(v) != v or not 0 <= v <= self.confirm_hits:
@@ -179,6 +189,7 @@ class _Track:
     y0: float = 0.0
     travelled: float = 0.0  # the farthest the corrected position has been from (x0, y0)
     evidence: int = 0  # associated detections that had evidence (while tentative)
+    hidden: int = 0  # of the misses in a row, those while the predicted position was occluded
 
     def predict(self, dt: float, q00: float, q01: float, q11: float) -> None:
         """:func:`kalman_predict` over ``dt`` seconds with process noise ``[[q00, q01], [q01, q11]]`` per axis."""
@@ -315,12 +326,16 @@ class PeopleTracker:
         *,
         evidence: npt.ArrayLike | None = None,
         births: npt.ArrayLike | None = None,
+        occluded: Callable[[FloatArray], npt.ArrayLike] | None = None,
     ) -> list[TrackState]:
         """Advance to time ``t`` (seconds) with person positions ``(K, 2)``; returns the confirmed tracks.
 
         ``evidence`` ``(K,)`` bool: the detections that count towards ``confirm_evidence``
         (None: all). ``births`` ``(K,)`` bool: the detections that may start or feed a
-        tentative track (None: all); the others can only feed confirmed tracks.
+        tentative track (None: all); the others can only feed confirmed tracks. ``occluded``:
+        given the predicted positions ``(M, 2)`` of the confirmed tracks that missed this scan,
+        says ``(M,)`` bool which of them something nearer hides from the sensor (see
+        ``max_occluded``).
         """
         Z = (
             np.asarray(detections, dtype=np.float64).reshape(-1, 2)
@@ -373,13 +388,24 @@ class PeopleTracker:
                 free[k] = False
                 n_free -= 1
                 seen.add(id(tr))
+        hidden: set[int] = set()
+        if occluded is not None and cfg.max_occluded > 0:
+            missing = [tr for tr in self._tracks if tr.id > 0 and id(tr) not in seen]
+            if missing:
+                flags = np.asarray(occluded(np.array([(tr.px, tr.py) for tr in missing])), dtype=bool)
+                hidden = {id(tr) for tr, f in zip(missing, flags.reshape(-1).tolist(), strict=True) if f}
         survivors: list[_Track] = []
         for tr in self._tracks:
             if id(tr) not in seen:
                 tr.misses += 1
+                tr.hidden += id(tr) in hidden
+            else:
+                tr.hidden = 0
             tr.age += 1
             if tr.id > 0:
-                if tr.misses <= cfg.max_misses:
+                if tr.misses - tr.hidden <= cfg.max_misses and (
+                    tr.hidden == 0 or t - tr.last_seen <= cfg.max_occluded
+                ):
                     survivors.append(tr)
             elif tr.misses < cfg.tentative_misses:
                 if tr.hits >= cfg.confirm_hits and (

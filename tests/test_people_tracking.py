@@ -185,3 +185,29 @@ def test_a_hidden_track_coasts_up_to_max_occluded_seconds() -> None:
     assert [(t.id, t.misses) for t in out] == [(1, 0)]
     with pytest.raises(ValueError, match="max_occluded"):
         TrackerConfig(max_occluded=-1.0)
+
+
+def test_a_track_confirmed_where_one_vanished_continues_it() -> None:
+    cfg = TrackerConfig(confirm_hits=3, confirm_evidence=3, max_misses=1, revive_radius=1.0, revive_for=5.0)
+    tr = PeopleTracker(cfg)
+    for k in range(4):  # a walker with evidence: confirmed as 1
+        out = tr.update([[0.2 * k, 0.0]], k * DT, evidence=[True])
+    assert [t.id for t in out] == [1]
+    for k in range(4, 7):  # out of sight: deleted after max_misses
+        out = tr.update([], k * DT)
+    assert out == []
+    # back 0.8 m from where it was last seen, standing (no evidence): continues track 1
+    for k in range(7, 10):
+        out = tr.update([[1.4, 0.0]], k * DT, evidence=[False])
+    assert [t.id for t in out] == [1]
+    # somewhere else, or too late: no evidence, no track
+    tr2 = PeopleTracker(cfg)
+    for k in range(4):
+        tr2.update([[0.2 * k, 0.0]], k * DT, evidence=[True])
+    for k in range(4, 7):
+        tr2.update([], k * DT)
+    for k in range(7, 12):
+        out = tr2.update([[3.0, 0.0]], k * DT, evidence=[False])
+    assert out == []
+    with pytest.raises(ValueError, match="revive_radius"):
+        TrackerConfig(revive_radius=-1.0)

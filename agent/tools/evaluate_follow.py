@@ -8,8 +8,10 @@ beyond 2 m) stands in front of the robot for 3 s, then — "Follow me." — walk
 legs ``into_room``, ``false_doorway`` and ``to_view`` one after the other; every scan goes
 through :class:`~knowledge.people.pipeline.PeoplePipeline` (the bundled detector; the
 tracker as configured) and :class:`~agent.follow.FollowMe`, whose goals drive the robot.
-When follow-me gives up ("I lost you.", or "I cannot see anyone" while searching) it is
-counted and started again, as a tutor would say "Follow me." again.
+When follow-me gives up it is counted — "I lost you." (the target was being followed) apart
+from "I cannot see anyone in front of me." (searching gave up) — and started again, as a
+tutor would say "Follow me." again (a restart searches only in front of the robot, so one
+loss can be followed by many give-ups while the tutor stands beside it).
 
 Counted per seed: the times the tutor was lost, the seconds spent searching, the
 tutor's legs finished, the largest robot–tutor distance, and the scans in which the target
@@ -34,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from agent.follow import FollowMe, FollowParams
+from agent.follow import LOST_MESSAGE, FollowMe, FollowParams
 from drivers.sim.robot import Goal, SimRobot, SimRobotConfig
 from drivers.sim.tour import tour_world
 from drivers.sim.tutor import Tutor
@@ -179,21 +181,24 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(r)
             print(json.dumps(r), file=sys.stderr)
     lines = [
-        "| configuration | seed | lost | lost at (s) | legs walked | searching (s) | max distance (m) | wrong-target scans |",
-        "| --- | ---: | ---: | --- | ---: | ---: | ---: | ---: |",
+        '| configuration | seed | lost ("I lost you.") | first lost at (s) | gave up searching | legs walked '
+        "| searching (s) | max distance (m) | wrong-target scans |",
+        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     for r in rows:
-        at = ", ".join(f"{t:g}" for t, _ in r["lost_at"]) or "—"
+        lost = [t for t, m in r["lost_at"] if m == LOST_MESSAGE]
+        gave_up = len(r["lost_at"]) - len(lost)
+        at = f"{lost[0]:g}" if lost else "—"
         lines.append(
-            f"| {r['config']} | {r['seed']} | {r['lost']} | {at} | {r['legs_finished']}/{len(LEGS)} | "
+            f"| {r['config']} | {r['seed']} | {len(lost)} | {at} | {gave_up} | {r['legs_finished']}/{len(LEGS)} | "
             f"{r['searching_s']} | {r['max_distance_m']} | {r['wrong_target_scans']} |"
         )
     for name in CONFIGS:
         sel = [r for r in rows if r["config"] == name]
+        n_lost = [sum(m == LOST_MESSAGE for _, m in r["lost_at"]) for r in sel]
         lines.append(
-            f"\n{name}: lost {sum(r['lost'] for r in sel)} times in {len(sel)} tours "
-            f"({sum(r['lost'] > 0 for r in sel)} tours with a loss); all legs walked in "
-            f"{sum(r['legs_finished'] == len(LEGS) for r in sel)}"
+            f"\n{name}: the tutor lost {sum(n_lost)} times in {len(sel)} tours ({sum(n > 0 for n in n_lost)} "
+            f"tours with a loss); all legs walked in {sum(r['legs_finished'] == len(LEGS) for r in sel)}"
         )
     text = "\n".join(lines)
     print(text)

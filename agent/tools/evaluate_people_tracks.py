@@ -228,11 +228,9 @@ def main(argv: list[str] | None = None) -> int:
             f"| {p} | {d['precision_pct']:.1f} % | {d['recall_pct']:.1f} % | {d['true_positives']} | "
             f"{d['false_positives']} | {d['false_negatives']} |"
         )
-    ms = runs["default"]["people_ms_per_scan"]
     lines += [
         "",
-        f"People step in this run (default tracker, whole pipeline per scan, mean): {ms:.2f} ms per scan "
-        "(wall time on the shared 2-core machine; the real-time benchmark is `python -m agent.tools.bench_people`).",
+        "Time per scan is measured by `python -m agent.tools.bench_people` (docs/people.md, Benchmark).",
         "",
     ]
     args.out.mkdir(parents=True, exist_ok=True)

@@ -35,9 +35,17 @@ SCHEMA = "loci.people/1"
 MAX_MOTION_GAP = 1.0
 #: The tracker of the pipeline: tentative tracks survive two missed scans, and are confirmed
 #: after three detections that stood where the laser saw through a moment before, or once they
-#: walked 0.2 m; a confirmed track hidden behind something nearer coasts for up to 2 s
+#: walked 0.2 m; a confirmed track hidden behind something nearer coasts for up to 2 s, and a
+#: track confirmed within 1 m of where one vanished less than 5 s before continues it (its id)
 #: (docs/results/people_tracks.md has the measurements behind these values).
-DEFAULT_TRACKER = TrackerConfig(tentative_misses=3, confirm_evidence=3, confirm_travel=0.2, max_occluded=2.0)
+DEFAULT_TRACKER = TrackerConfig(
+    tentative_misses=3,
+    confirm_evidence=3,
+    confirm_travel=0.2,
+    max_occluded=2.0,
+    revive_radius=1.0,
+    revive_for=5.0,
+)
 #: A person candidate on cells the laser has hit for this long starts no track.
 DEFAULT_STATIC = StaticParams(settle=2.0)
 #: Scans of the last two seconds that must have seen through a detection for it to be evidence.

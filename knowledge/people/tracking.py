@@ -36,7 +36,11 @@ Each scan (:meth:`PeopleTracker.update`):
    most ``max_occluded`` seconds since it was last seen: a person hidden for a moment keeps
    their track (and follow-me its target).
 
-Ids are integers from 1, given in order of confirmation, never reused by one tracker.
+Ids are integers from 1, given in order of confirmation, never given to another person's
+track by one tracker; but a track confirmed within ``revive_radius`` metres of where a confirmed
+track was last seen, less than ``revive_for`` seconds after it vanished, *continues* that track
+with its id (the person stepped out of view, round a corner, behind someone, and back). It needs
+no evidence then: a person the laser saw walking a moment ago may stand still now.
 """
 
 from __future__ import annotations
@@ -66,6 +70,8 @@ class TrackerConfig:
     confirm_evidence: int = 0
     confirm_travel: float | None = None
     max_occluded: float = 0.0
+    revive_radius: float = 0.0
+    revive_for: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("gate", "accel_std", "meas_std", "init_speed_std"):
@@ -82,6 +88,10 @@ class TrackerConfig:
             raise ValueError(
                 f"TrackerConfig.confirm_travel must be None or a positive number, got {self.confirm_travel!r}"
             )
+        for name in ("revive_radius", "revive_for"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"TrackerConfig.{name} must be a number >= 0, got {v!r}")
         if not (math.isfinite(self.max_occluded) and self.max_occluded >= 0):
             raise ValueError(
                 f"TrackerConfig.max_occluded must be a number of seconds >= 0, got {self.max_occluded!r}"
@@ -266,6 +276,7 @@ class PeopleTracker:
     def __init__(self, config: TrackerConfig | None = None) -> None:
         self.config = config or TrackerConfig()
         self._tracks: list[_Track] = []
+        self._vanished: list[tuple[int, float, float, float]] = []  # id, x, y, last seen
         self._next_id = 1
         self._time: float | None = None
         self._noise: tuple[tuple[float, float], float, float, float] = ((math.nan, math.nan), 0.0, 0.0, 0.0)
@@ -278,6 +289,7 @@ class PeopleTracker:
     def reset(self) -> None:
         """Forget every track (ids keep counting up)."""
         self._tracks = []
+        self._vanished = []
         self._time = None
 
     def tracks(self, *, include_tentative: bool = False) -> list[TrackState]:
@@ -309,6 +321,21 @@ class PeopleTracker:
             )
             for k, t in enumerate(sel)
         ]
+
+    def _revive(self, tr: _Track, t: float) -> int:
+        """The id of the vanished confirmed track that ``tr`` continues (0: none): the nearest
+        within ``revive_radius`` of ``tr``'s birth place that vanished less than ``revive_for``
+        seconds ago and was last seen before ``tr`` was born."""
+        cfg = self.config
+        self._vanished = [v for v in self._vanished if t - v[3] <= cfg.revive_for]
+        best, best_d = -1, cfg.revive_radius
+        for k, (_, x, y, seen) in enumerate(self._vanished):
+            d = math.hypot(tr.x0 - x, tr.y0 - y)
+            if seen < tr.born and d <= best_d:
+                best, best_d = k, d
+        if best < 0:
+            return 0
+        return self._vanished.pop(best)[0]
 
     def _process_noise(self, dt: float) -> tuple[float, float, float]:
         """The per-axis block ``(q00, q01, q11)`` of :func:`cv_process_noise` over ``dt``
@@ -407,13 +434,18 @@ class PeopleTracker:
                     tr.hidden == 0 or t - tr.last_seen <= cfg.max_occluded
                 ):
                     survivors.append(tr)
+                elif cfg.revive_radius > 0:
+                    self._vanished.append((tr.id, tr.px, tr.py, tr.last_seen))
             elif tr.misses < cfg.tentative_misses:
-                if tr.hits >= cfg.confirm_hits and (
-                    tr.evidence >= cfg.confirm_evidence
-                    or (cfg.confirm_travel is not None and tr.travelled >= cfg.confirm_travel)
-                ):
-                    tr.id = self._next_id
-                    self._next_id += 1
+                if tr.hits >= cfg.confirm_hits:
+                    revived = self._revive(tr, t)
+                    if revived:
+                        tr.id = revived
+                    elif tr.evidence >= cfg.confirm_evidence or (
+                        cfg.confirm_travel is not None and tr.travelled >= cfg.confirm_travel
+                    ):
+                        tr.id = self._next_id
+                        self._next_id += 1
                 survivors.append(tr)
         if n_free:
             p0 = cfg.meas_std**2

@@ -109,6 +109,7 @@ def run_seed(seed: int, tracker: str, det: LegDetector, params: FollowParams | N
             follow.start(sample.stamp)
             tutor.walk(tour.leg(legs.pop(0)).waypoints)
             started = True
+            last_t = t
         elif started and legs and not tutor.walking:
             tutor.walk(tour.leg(legs.pop(0)).waypoints)
         if started and not legs and not tutor.walking and finished_at is None:

@@ -231,6 +231,8 @@ def main(argv: list[str] | None = None) -> int:
     lines += [
         "",
         "Time per scan is measured by `python -m agent.tools.bench_people` (docs/people.md, Benchmark).",
+        "Follow-me on the guided tour's seeds in the simulator: [follow_tour.md](follow_tour.md)",
+        "(`python -m agent.tools.evaluate_follow --seeds 0-7 --out docs/results`).",
         "",
     ]
     args.out.mkdir(parents=True, exist_ok=True)

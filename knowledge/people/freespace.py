@@ -15,8 +15,8 @@ ranges ``(B,)`` metres, beam ``m`` at ``angle_min + m·angle_increment``; times 
 
 from __future__ import annotations
 
+import bisect
 import math
-from collections import deque
 from dataclasses import dataclass
 
 import numba
@@ -69,7 +69,8 @@ class SeenThrough:
 
     def __init__(self, params: SeenThroughParams | None = None) -> None:
         self.params = params or SeenThroughParams()
-        self._scans: deque[_Scan] = deque()
+        self._scans: list[_Scan] = []
+        self._stamps: list[float] = []
 
     def __len__(self) -> int:
         return len(self._scans)
@@ -94,8 +95,10 @@ class SeenThrough:
         r[no_return] = np.inf
         r[invalid] = np.nan
         self._scans.append(_Scan(float(stamp), pose, r, float(angle_min), float(angle_increment)))
-        while self._scans and self._scans[0].stamp < stamp - self.params.horizon:
-            self._scans.popleft()
+        self._stamps.append(float(stamp))
+        cut = bisect.bisect_left(self._stamps, stamp - self.params.horizon)
+        if cut:
+            del self._scans[:cut], self._stamps[:cut]
 
     def evidence(self, points: npt.ArrayLike, stamp: float) -> npt.NDArray[np.int64]:
         """``(K,)`` for each point, how many remembered scans ``min_lag``–``horizon`` s before
@@ -105,7 +108,9 @@ class SeenThrough:
         out = np.zeros(q.shape[0], dtype=np.int64)
         if not q.shape[0]:
             return out
-        old = [s for s in self._scans if prm.min_lag <= stamp - s.stamp <= prm.horizon]
+        lo = bisect.bisect_left(self._stamps, stamp - prm.horizon)
+        hi = bisect.bisect_right(self._stamps, stamp - prm.min_lag)
+        old = self._scans[lo:hi]
         if len(old) > prm.max_scans:
             pick = np.linspace(0, len(old) - 1, prm.max_scans).round().astype(int)
             old = [old[i] for i in pick]

@@ -20,6 +20,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+import numba
 import numpy as np
 import numpy.typing as npt
 
@@ -124,24 +125,52 @@ def hidden_behind(
     within :data:`OCCLUSION_HALF_WIDTH` of each point ``(K, 2)`` ended at least
     :data:`OCCLUSION_MARGIN` in front of it: something nearer hides it. Points outside the
     field of view are not hidden (they are out of sight)."""
-    q = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    out = np.zeros(q.shape[0], dtype=bool)
+    q = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 2))
+    out = np.zeros(q.shape[0], dtype=np.bool_)
+    _hidden(
+        q,
+        np.ascontiguousarray(ranges, dtype=np.float64),
+        float(pose[0]),
+        float(pose[1]),
+        float(pose[2]),
+        float(angle_min),
+        float(angle_increment),
+        float(range_max),
+        float(range_min),
+        out,
+    )
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _hidden(
+    q: np.ndarray,
+    ranges: np.ndarray,
+    x: float,
+    y: float,
+    th: float,
+    angle_min: float,
+    inc: float,
+    range_max: float,
+    range_min: float,
+    out: np.ndarray,
+) -> None:
+    """:func:`hidden_behind` into ``out`` (K,) bool."""
     n = ranges.shape[0]
-    x, y, th = pose
     for k in range(q.shape[0]):
         dx, dy = q[k, 0] - x, q[k, 1] - y
         d = math.hypot(dx, dy)
-        b = math.atan2(math.sin(math.atan2(dy, dx) - th), math.cos(math.atan2(dy, dx) - th))
-        centre = round((b - angle_min) / angle_increment)
-        w = math.ceil(OCCLUSION_HALF_WIDTH / (max(d, 0.05) * angle_increment))
-        lo, hi = max(0, centre - w), min(n, centre + w + 1)
-        if centre < 0 or centre >= n or lo >= hi:
+        b = math.atan2(dy, dx) - th
+        b = math.atan2(math.sin(b), math.cos(b))
+        centre = int(np.rint((b - angle_min) / inc))
+        if centre < 0 or centre >= n:
             continue
-        r = ranges[lo:hi]
-        with np.errstate(invalid="ignore"):
-            valid = np.isfinite(r) & (r > 0) & (r >= range_min) & (r < range_max)
-        out[k] = bool((valid & (r < d - OCCLUSION_MARGIN)).any())
-    return out
+        w = math.ceil(OCCLUSION_HALF_WIDTH / (max(d, 0.05) * inc))
+        for i in range(max(0, centre - w), min(n, centre + w + 1)):
+            r = ranges[i]
+            if math.isfinite(r) and r > 0 and r >= range_min and r < range_max and r < d - OCCLUSION_MARGIN:
+                out[k] = True
+                break
 
 
 class PeoplePipeline:

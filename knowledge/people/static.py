@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 __all__ = ["StaticCells", "StaticParams"]
@@ -50,10 +51,6 @@ class StaticParams:
             raise ValueError(f"StaticParams.reach must be >= 0 metres, got {self.reach!r}")
 
 
-def _keys(ij: np.ndarray) -> np.ndarray:
-    return (ij[:, 0].astype(np.int64) << 32) | (ij[:, 1].astype(np.int64) & 0xFFFFFFFF)
-
-
 #: Side of the table of cells (cells): a cell lives at (i mod SIZE, j mod SIZE), so two cells
 #: share a slot only when they are SIZE cells apart (51 m at 10 cm); the slot keeps the one
 #: hit last, and a cell whose slot holds another cell counts as never hit.
@@ -78,35 +75,74 @@ class StaticCells:
 
     def update(self, points: np.ndarray, stamp: float) -> None:
         """The scan at ``stamp`` hit ``points`` (``(k, 2)`` metres, tracking frame)."""
-        prm = self.params
+        pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 2))
         t = float(stamp)
-        pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        pts = pts[np.isfinite(pts).all(axis=1)]
-        ij = np.floor(pts / prm.cell).astype(np.int64)
-        keys = _keys(ij)
-        a, b = ij[:, 0] % SIZE, ij[:, 1] % SIZE
-        same = (self._key[a, b] == keys) & (self._last[a, b] >= t - prm.forget)
-        # a cell hit twice in one scan gets the same values from both writes
-        self._first[a, b] = np.where(same, self._first[a, b], t)
-        self._last[a, b] = t
-        self._key[a, b] = keys
+        _update(pts, t, self.params.cell, self.params.forget, self._key, self._first, self._last)
         self._time = t
 
     def static(self, points: np.ndarray) -> np.ndarray:
         """``(k,)`` bool: a cell within ``reach`` of each point has been hit, without a break
         longer than ``forget``, for ``settle`` seconds up to the last update."""
         prm = self.params
-        pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        if not pts.shape[0] or self._time == -math.inf:
-            return np.zeros(pts.shape[0], dtype=bool)
-        r = math.ceil(prm.reach / prm.cell)
-        span = np.arange(-r, r + 1, dtype=np.int64)
-        offsets = np.stack(np.meshgrid(span, span, indexing="ij"), axis=-1).reshape(-1, 2)
-        ij = (np.floor(pts / prm.cell).astype(np.int64)[:, None, :] + offsets[None, :, :]).reshape(-1, 2)
-        a, b = ij[:, 0] % SIZE, ij[:, 1] % SIZE
-        hit = (
-            (self._key[a, b] == _keys(ij))
-            & (self._time - self._first[a, b] >= prm.settle)
-            & (self._last[a, b] >= self._time - prm.forget)
-        )
-        return np.asarray(hit.reshape(pts.shape[0], -1).any(axis=1))
+        pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 2))
+        out = np.zeros(pts.shape[0], dtype=np.bool_)
+        if pts.shape[0] and self._time != -math.inf:
+            r = math.ceil(prm.reach / prm.cell)
+            _static(
+                pts, self._time, prm.cell, prm.settle, prm.forget, r, self._key, self._first, self._last, out
+            )
+        return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _key_of(i: int, j: int) -> int:
+    return (i << 32) | (j & 0xFFFFFFFF)
+
+
+@numba.njit(cache=True, nogil=True)
+def _update(
+    pts: np.ndarray,
+    t: float,
+    cell: float,
+    forget: float,
+    key: np.ndarray,
+    first: np.ndarray,
+    last: np.ndarray,
+) -> None:
+    """:meth:`StaticCells.update`: each finite point's cell is hit at ``t``; a cell not hit
+    within ``forget`` (or whose slot held another cell) starts afresh."""
+    for k in range(pts.shape[0]):
+        x, y = pts[k, 0], pts[k, 1]
+        if not (math.isfinite(x) and math.isfinite(y)):
+            continue
+        i, j = math.floor(x / cell), math.floor(y / cell)
+        kk = _key_of(i, j)
+        a, b = i % SIZE, j % SIZE
+        if not (key[a, b] == kk and last[a, b] >= t - forget):
+            first[a, b] = t
+        last[a, b] = t
+        key[a, b] = kk
+
+
+@numba.njit(cache=True, nogil=True)
+def _static(
+    pts: np.ndarray,
+    now: float,
+    cell: float,
+    settle: float,
+    forget: float,
+    r: int,
+    key: np.ndarray,
+    first: np.ndarray,
+    last: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """:meth:`StaticCells.static` into ``out`` (K,) bool."""
+    for k in range(pts.shape[0]):
+        i0, j0 = math.floor(pts[k, 0] / cell), math.floor(pts[k, 1] / cell)
+        for di in range(-r, r + 1):
+            for dj in range(-r, r + 1):
+                i, j = i0 + di, j0 + dj
+                a, b = i % SIZE, j % SIZE
+                if key[a, b] == _key_of(i, j) and now - first[a, b] >= settle and last[a, b] >= now - forget:
+                    out[k] = True

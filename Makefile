@@ -53,6 +53,8 @@ eval: $(STAMP)
 	$(BIN)/python -m agent.tools.evaluate_places --out docs/results
 	$(BIN)/python -m agent.tools.evaluate_topology --out docs/results
 	$(BIN)/python -m agent.tools.evaluate_real_logs --out docs/results
+	$(BIN)/python -m agent.tools.evaluate_people_tracks --out docs/results
+	$(BIN)/python -m agent.tools.evaluate_follow --seeds 0-7 --out docs/results
 
 bench: $(BENCH_STAMP)
 	$(BIN)/python -m agent.tools.bench --out docs/results

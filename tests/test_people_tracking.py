@@ -118,3 +118,96 @@ def test_config_is_checked() -> None:
         TrackerConfig(gate=0.0)
     with pytest.raises(ValueError, match="confirm_hits"):
         TrackerConfig(confirm_hits=0)
+    with pytest.raises(ValueError, match="confirm_evidence"):
+        TrackerConfig(confirm_evidence=4)  # more than confirm_hits
+    with pytest.raises(ValueError, match="confirm_travel"):
+        TrackerConfig(confirm_travel=0.0)
+
+
+def test_detections_that_may_not_give_birth_feed_only_confirmed_tracks() -> None:
+    tr = PeopleTracker(TrackerConfig(confirm_hits=3))
+    for k in range(5):  # furniture: never starts a track
+        assert tr.update([[1.0, 0.0]], k * DT, births=[False]) == []
+    assert tr.tracks(include_tentative=True) == []
+    for k in range(5, 8):  # a person walks in: born, confirmed after three scans
+        out = tr.update([[3.0, 0.1 * k]], k * DT, births=[True])
+    assert [t.id for t in out] == [1]
+    out = tr.update([[3.0, 0.8]], 8 * DT, births=[False])  # then stands on a "static" cell
+    assert out[0].misses == 0 and out[0].hits == 4
+    # a no-birth detection does not feed a tentative track either
+    tr2 = PeopleTracker(TrackerConfig(confirm_hits=2, tentative_misses=2))
+    tr2.update([[0.0, 0.0]], 0.0)
+    tr2.update([[0.0, 0.0]], DT, births=[False])
+    assert [t.hits for t in tr2.tracks(include_tentative=True)] == [1]
+    with pytest.raises(ValueError, match="one per detection"):
+        tr2.update([[0.0, 0.0]], 2 * DT, births=[True, False])
+
+
+def test_confirmation_waits_for_evidence_or_travel() -> None:
+    cfg = TrackerConfig(confirm_hits=3, confirm_evidence=2)
+    tr = PeopleTracker(cfg)
+    for k in range(6):  # hits without evidence: tentative for ever
+        assert tr.update([[1.0, 0.0]], k * DT, evidence=[False]) == []
+    assert tr.update([[1.0, 0.0]], 6 * DT, evidence=[True]) == []  # one piece of evidence
+    assert [t.id for t in tr.update([[1.0, 0.0]], 7 * DT, evidence=[True])] == [1]  # two
+    # or it walked confirm_travel metres from where it was born
+    tr = PeopleTracker(TrackerConfig(confirm_hits=3, confirm_evidence=3, confirm_travel=0.3))
+    out = []
+    for k in range(8):
+        out = tr.update([[0.0, 0.06 * k]], k * DT, evidence=[False])
+        if out:
+            break
+    assert out and out[0].travelled >= 0.3
+    assert k >= 5  # not before it had walked that far
+
+
+def test_a_hidden_track_coasts_up_to_max_occluded_seconds() -> None:
+    cfg = TrackerConfig(confirm_hits=2, max_misses=2, max_occluded=1.05)
+    for hidden, survives in ((True, 10), (False, 2)):
+        tr = PeopleTracker(cfg)
+        tr.update([[2.0, 0.0]], 0.0)
+        assert [t.id for t in tr.update([[2.0, 0.0]], DT)] == [1]
+        n = 0
+        for k in range(2, 30):  # nobody seen from now on
+            out = tr.update([], k * DT, occluded=lambda p, h=hidden: np.full(len(p), h))
+            if not out:
+                break
+            n += 1
+        # hidden: coasts while t - last_seen <= 1.05 s (10 scans); in plain view: max_misses scans
+        assert n == survives
+    # a detection after the occlusion takes the track up again, with its id
+    tr = PeopleTracker(cfg)
+    tr.update([[2.0, 0.0]], 0.0)
+    tr.update([[2.0, 0.0]], DT)
+    for k in range(2, 8):
+        tr.update([], k * DT, occluded=lambda p: np.ones(len(p), dtype=bool))
+    out = tr.update([[2.05, 0.0]], 8 * DT)
+    assert [(t.id, t.misses) for t in out] == [(1, 0)]
+    with pytest.raises(ValueError, match="max_occluded"):
+        TrackerConfig(max_occluded=-1.0)
+
+
+def test_a_track_confirmed_where_one_vanished_continues_it() -> None:
+    cfg = TrackerConfig(confirm_hits=3, confirm_evidence=3, max_misses=1, revive_radius=1.0, revive_for=5.0)
+    tr = PeopleTracker(cfg)
+    for k in range(4):  # a walker with evidence: confirmed as 1
+        out = tr.update([[0.2 * k, 0.0]], k * DT, evidence=[True])
+    assert [t.id for t in out] == [1]
+    for k in range(4, 7):  # out of sight: deleted after max_misses
+        out = tr.update([], k * DT)
+    assert out == []
+    # back 0.8 m from where it was last seen, standing (no evidence): continues track 1
+    for k in range(7, 10):
+        out = tr.update([[1.4, 0.0]], k * DT, evidence=[False])
+    assert [t.id for t in out] == [1]
+    # somewhere else, or too late: no evidence, no track
+    tr2 = PeopleTracker(cfg)
+    for k in range(4):
+        tr2.update([[0.2 * k, 0.0]], k * DT, evidence=[True])
+    for k in range(4, 7):
+        tr2.update([], k * DT)
+    for k in range(7, 12):
+        out = tr2.update([[3.0, 0.0]], k * DT, evidence=[False])
+    assert out == []
+    with pytest.raises(ValueError, match="revive_radius"):
+        TrackerConfig(revive_radius=-1.0)

@@ -1,10 +1,15 @@
-"""``loci people``: train and evaluate the leg detector on the legs data (book chapter 8).
+"""``loci people``: the leg detector on the legs data (book chapter 8), and people tracks.
 
 ``loci people train --out MODEL`` trains on the protocol's TRAIN split (positive_1..4 and the
 first 70 % of negative_2's scans) and writes a model; ``loci people evaluate`` scores a model
 (default: the bundled one) on the TEST split (positive_6..7 and the rest of negative_2) and
 prints the confusion matrix in the form of the book's Tables 8.1–8.3 and the five most
 important features (Table 8.6); ``--json`` prints one JSON object instead.
+
+``loci people track RECORDING --out TRACKS.jsonl`` runs the agent's people step over a
+recording (:mod:`agent.people_tracks`); ``loci people evaluate-tracks TRACKS.jsonl --truth
+BAG`` scores the tracks against a leg_tracker benchmark bag's annotated people with CLEAR-MOT
+(:mod:`knowledge.people.clearmot`), as the benchmark's scorer does.
 
 The data folder is ``--data DIR``, else ``$LOCI_DATA``, else the ``../shared/data`` beside the
 repository (the same rule as the tests); DIR may be that folder or its ``legs/`` sub-folder.
@@ -15,6 +20,7 @@ from __future__ import annotations
 import argparse
 import functools
 import json
+import math
 import os
 import sys
 import time
@@ -36,7 +42,7 @@ def default_data_dir() -> Path:
 def register(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "people",
-        help="people in laser scans: train and evaluate the leg detector",
+        help="people in laser scans: train and evaluate the leg detector, track people, score tracks",
         description=(
             "People in laser scans (book chapter 8): jump-distance segments, the 14 features of "
             "appendix C, generalized AdaBoost with T = 100 threshold learners."
@@ -103,6 +109,29 @@ def register(subparsers: Any) -> None:
         help="decision threshold on F: 'sign' (F >= 0, the book's; default) or 'train-cv' (the one that "
         "minimises max(FN, FP) in a 4-fold cross-validation on the TRAIN split; the test split is never used)",
     )
+    tr.add_argument(
+        "--bag",
+        type=Path,
+        metavar="BAG",
+        help="also train on the people annotated in a leg_tracker benchmark bag (legs near an annotated "
+        "person are people, segments in the -80..12 degree arc far from everyone are not)",
+    )
+    tr.add_argument(
+        "--bag-window",
+        type=float,
+        nargs=2,
+        metavar=("START", "END"),
+        default=(-math.inf, math.inf),
+        help="only the bag's scans from START to END seconds after its first scan (keep the part you "
+        "score on out: e.g. --bag-window 36 1000 to score on the first 36 s)",
+    )
+    tr.add_argument(
+        "--bag-weight",
+        type=positive_float,
+        default=1.0,
+        metavar="W",
+        help="initial weight of the bag's segments relative to the legs data's, within each class (default: 1)",
+    )
     tr.set_defaults(handler=_train)
 
     ev = sub.add_parser(
@@ -120,6 +149,77 @@ def register(subparsers: Any) -> None:
         "--split", choices=("test", "train"), default="test", help="which split to score (default: test)"
     )
     ev.set_defaults(handler=_evaluate)
+
+    tk = sub.add_parser(
+        "track",
+        help="detect and track people over a recording, as the agent does; write the tracks",
+        description=(
+            "Run the agent's people step over a recording (loci run --record, loci record, loci import; a "
+            "ROS 1 bag is imported first): scans and odometry associated as in loci run, people detected, "
+            "paired and tracked in the odometry frame while the robot moves. Writes JSON lines: a header, "
+            "then per scan the laser's odometry pose, the detected people and the confirmed tracks."
+        ),
+        epilog="Example: loci people track people.mcap --out tracks.jsonl",
+    )
+    tk.add_argument("recording", type=Path, metavar="RECORDING", help="an MCAP recording or a ROS 1 bag")
+    tk.add_argument(
+        "--out", type=Path, required=True, metavar="TRACKS.jsonl", help="where to write the tracks"
+    )
+    tk.add_argument("--model", type=Path, metavar="M", help="leg detector (default: the bundled one)")
+    tk.add_argument("--robot", help="the robot whose scans to use (default: the recording's)")
+    tk.add_argument(
+        "--plain",
+        action="store_true",
+        help="the plain tracker: no static cells, no free-space evidence (before issue 15; for comparison)",
+    )
+    tk.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    tk.set_defaults(handler=_track)
+
+    et = sub.add_parser(
+        "evaluate-tracks",
+        help="score tracks against a benchmark bag's annotated people (CLEAR-MOT)",
+        description=(
+            "Score tracks written by loci people track against the hand-annotated people of a leg_tracker "
+            "benchmark bag (/ground_truth_people_tracks), as the benchmark's scorer does: per scan, in the "
+            "laser's frame, CLEAR-MOT at 0.75 m (valid, misses, false positives, identity switches, MOTA, "
+            "MOTP) over the people between -80 and 12 degrees; plus precision and recall of each scan's "
+            "detected people at 0.5 m."
+        ),
+        epilog="Example: loci people evaluate-tracks tracks.jsonl --truth general_tracking_moving_1.bag",
+    )
+    et.add_argument("tracks", type=Path, metavar="TRACKS.jsonl", help="written by loci people track")
+    et.add_argument("--truth", type=Path, required=True, metavar="BAG", help="the annotated ROS 1 bag")
+    et.add_argument(
+        "--window",
+        type=float,
+        nargs=2,
+        metavar=("START", "END"),
+        default=(-math.inf, math.inf),
+        help="score only the scans from START to END seconds after the bag's first scan (default: all)",
+    )
+    et.add_argument(
+        "--arc",
+        type=float,
+        nargs=2,
+        metavar=("MIN", "MAX"),
+        default=(-80.0, 12.0),
+        help="bearings in degrees, laser frame, of the people scored (default: -80 12, the benchmark's)",
+    )
+    et.add_argument("--all-bearings", action="store_true", help="score people at every bearing")
+    et.add_argument(
+        "--threshold",
+        type=positive_float,
+        default=0.75,
+        metavar="M",
+        help="CLEAR-MOT match distance (0.75 m)",
+    )
+    et.add_argument(
+        "--coasting",
+        action="store_true",
+        help="also score confirmed tracks not seen in the scan (by default only tracks seen in it count)",
+    )
+    et.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    et.set_defaults(handler=_evaluate_tracks)
 
 
 def _progress(total: int, desc: str) -> Any:
@@ -141,10 +241,22 @@ def _examples(args: argparse.Namespace, split: str, jump: float, max_gap: int | 
 
 
 def _train(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from knowledge.people.detector import LegDetector
     from knowledge.people.features import DEFAULT_COLUMNS, FEATURE_CODES, JUMP_COLUMNS, MOTION_COLUMN
 
     _, ex = _examples(args, "train", args.jump)
+    X, y, weight = ex.X, ex.y, None
+    bag_counts: dict[str, Any] | None = None
+    if args.bag is not None:
+        from agent.people_tracks import bag_examples
+
+        window = (float(args.bag_window[0]), float(args.bag_window[1]))
+        Xb, yb, _, counts = bag_examples(args.bag, window=window, jump=args.jump)
+        X, y = np.concatenate([ex.X, Xb]), np.concatenate([ex.y, yb])
+        weight = np.concatenate([np.ones(ex.y.size), np.full(yb.size, args.bag_weight)])
+        bag_counts = {"bag": str(args.bag), "window_s": list(window), "weight": args.bag_weight, **counts}
     if ex.n_positive == 0 or ex.n_negative == 0:
         print(
             f"loci: error: the TRAIN split gave {ex.n_positive} people and {ex.n_negative} non-people segments; "
@@ -170,8 +282,15 @@ def _train(args: argparse.Namespace) -> int:
         + (f" --jump {args.jump:g}" if args.jump != 0.15 else "")
         + (f" --max-range {args.max_range:g}" if args.max_range != 5.0 else "")
         + (f" --max-scans {args.max_scans}" if args.max_scans else "")
-        + (f" --threshold {args.threshold}" if args.threshold != "sign" else ""),
+        + (f" --threshold {args.threshold}" if args.threshold != "sign" else "")
+        + (
+            f" --bag {args.bag} --bag-window {args.bag_window[0]:g} {args.bag_window[1]:g} --bag-weight {args.bag_weight:g}"
+            if args.bag is not None
+            else ""
+        ),
     }
+    if bag_counts is not None:
+        training["bag"] = bag_counts
 
     def make(threshold: float = 0.0) -> LegDetector:
         return LegDetector(
@@ -198,7 +317,7 @@ def _train(args: argparse.Namespace) -> int:
             "false_negative_rate_pct": choice.false_negative_rate_pct,
             "false_positive_rate_pct": choice.false_positive_rate_pct,
         }
-    det = make(threshold).fit(ex.X, ex.y, training=training)
+    det = make(threshold).fit(X, y, training=training, sample_weight=weight)
     seconds = time.perf_counter() - t0
     path = det.save(args.out)
     summary = {
@@ -211,6 +330,7 @@ def _train(args: argparse.Namespace) -> int:
         "fit_seconds": seconds,
         "top_features": det.top_features(5),
         "threshold": det.threshold,
+        "bag": bag_counts,
     }
     if args.json:
         print(json.dumps(summary, indent=None, sort_keys=True))
@@ -220,6 +340,11 @@ def _train(args: argparse.Namespace) -> int:
             f"({ex.diagnostics['scans']} scans) in {seconds:.1f} s; "
             f"{summary['rounds']} weak learners, training error {summary['train_error_pct']:.2f}%"
         )
+        if bag_counts is not None:
+            print(
+                f"  and on {bag_counts['people']} people and {bag_counts['non_people']} non-people segments of "
+                f"{bag_counts['scans']} scans of {args.bag} (weight {args.bag_weight:g})"
+            )
         print(
             "most important features: "
             + ", ".join(f"{f['code']} {f['name']}" for f in summary["top_features"])
@@ -247,4 +372,107 @@ def _evaluate(args: argparse.Namespace) -> int:
         print(json.dumps(result, sort_keys=True))
     else:
         print(format_report(result))
+    return 0
+
+
+def _track(args: argparse.Namespace) -> int:
+    from agent.people_tracks import track_recording, write_tracks
+    from agent.progress import Progress
+    from knowledge.people.detector import LegDetector
+    from knowledge.people.pipeline import PeoplePipeline
+    from knowledge.people.tracking import TrackerConfig
+
+    det = LegDetector.load(args.model)
+    pipe = (
+        PeoplePipeline(det, tracker=TrackerConfig(), static=None, min_seen_through=0)
+        if args.plain
+        else PeoplePipeline(det)
+    )
+    src = args.recording
+    with Progress() as progress:
+        if src.suffix == ".bag":  # ROS 1: import into a temporary recording first
+            import tempfile
+
+            from agent.recording.importer import import_log
+
+            with tempfile.TemporaryDirectory(prefix="loci-people-") as tmp:
+                rec = Path(tmp) / "imported.mcap"
+                import_log(src, rec, fmt="ros1", progress=progress)
+                run = track_recording(
+                    rec, pipe, robot=args.robot, progress=lambda d, t: progress("track", d, t or d)
+                )
+        else:
+            run = track_recording(
+                src, pipe, robot=args.robot, progress=lambda d, t: progress("track", d, t or d)
+            )
+    header = {
+        "recording": str(src),
+        "model": str(args.model) if args.model else "bundled",
+        "tracker": "plain" if args.plain else "default",
+        "command": "loci people track " + str(src) + (" --plain" if args.plain else ""),
+    }
+    write_tracks(args.out, run, header)
+    n_tracks = len({int(i) for f in run.frames for i in f.tracks[:, 0]})
+    summary = {**run.summary(), "out": str(args.out), "tracks": n_tracks}
+    if args.json:
+        print(json.dumps(summary, sort_keys=True))
+    else:
+        dropped = sum(run.dropped.values())
+        print(
+            f"tracked {len(run.frames)} of {run.scans} scans ({dropped} dropped by the odometry association, "
+            f"{run.invalid} invalid): {n_tracks} confirmed tracks; people step "
+            f"{1000 * run.seconds_people / max(1, len(run.frames)):.2f} ms per scan"
+        )
+        print(f"wrote {args.out}")
+    return 0
+
+
+def _evaluate_tracks(args: argparse.Namespace) -> int:
+    from agent.people_tracks import read_annotations, read_tracks, score_tracks
+
+    header, frames = read_tracks(args.tracks)
+    truth = read_annotations(args.truth)
+    arc = None if args.all_bearings else (float(args.arc[0]), float(args.arc[1]))
+    res = score_tracks(
+        frames,
+        truth,
+        arc_deg=arc,
+        window=(float(args.window[0]), float(args.window[1])),
+        threshold=args.threshold,
+        coasting=args.coasting,
+    )
+    out = {
+        **res.as_dict(),
+        "tracks": str(args.tracks),
+        "truth": str(args.truth),
+        "arc_deg": list(arc) if arc else None,
+        "coasting": args.coasting,
+        "tracker": header.get("tracker"),
+    }
+    if args.json:
+        print(json.dumps(out, sort_keys=True))
+        return 0
+    m, d = res.mot, res.detections
+    where = "all bearings" if arc is None else f"bearings {arc[0]:g} to {arc[1]:g} deg"
+    print(
+        f"{res.frames} scans, {m.objects} annotated people in {where} "
+        f"({res.annotations_outside_arc} outside; {res.annotated_scans_missing} annotated scans not tracked)"
+    )
+    print(f"CLEAR-MOT at {m.threshold:g} m:")
+    print(
+        f"  valid {m.valid}  identity switches {m.id_switches}  misses {m.misses}  false positives {m.false_positives}"
+    )
+    mota = f"{100 * m.mota:.1f} %" if m.objects else "n/a"
+    motp = f"{m.motp:.3f} m" if m.matches else "n/a"
+    per = f"{m.misses / m.objects:.3f}" if m.objects else "n/a"
+    print(
+        f"  MOTA {mota}  MOTP {motp}  misses per annotated person {per}  "
+        f"false positives per scan {m.false_positives / max(1, m.frames):.3f}"
+    )
+    prec = f"{100 * d.precision:.1f} %" if d.true_positives + d.false_positives else "n/a"
+    rec = f"{100 * d.recall:.1f} %" if d.true_positives + d.false_negatives else "n/a"
+    print(
+        f"detected people per scan at {d.distance:g} m: precision {prec}, recall {rec} "
+        f"({d.true_positives} found, {d.false_positives} false, {d.false_negatives} missed)"
+    )
     return 0

@@ -27,7 +27,9 @@ Behaviour:
   target — the same person under a new id.
 * When the target has not been seen for ``lost_after`` seconds → **lost**: no goal,
   ``cancel`` once (the base should stop) and the message ``"I lost you."`` once. Lost is
-  final until :meth:`FollowMe.start` is called again.
+  final until :meth:`FollowMe.start` is called again. A target whose track vanished and
+  that the robot is driving after (the chase above) gets ``chase_for`` seconds more: the
+  robot needs them to reach the corner the person turned round and look.
 * :meth:`FollowMe.stop` → **idle** (nothing to do; stopping the base is the caller's job).
 
 Units: metres, radians, seconds (``stamp`` on the tracks' clock).
@@ -70,6 +72,9 @@ class FollowParams:
         chase_short: metres short of the vanished target's last position to drive to (>= 0).
         search_speed: m/s: how fast the reacquisition radius grows while the target is
             unseen (>= 0; a walking person who turned a corner is that far by now).
+        chase_for: seconds added to ``lost_after`` while the robot drives after a vanished
+            target (>= 0).
+        max_search_radius: metres; the reacquisition radius grows no further (> 0).
     """
 
     distance: float = 1.0
@@ -83,13 +88,29 @@ class FollowParams:
     search_for: float = 5.0
     chase_short: float = 0.5
     search_speed: float = 0.6
+    chase_for: float = 4.0
+    max_search_radius: float = 2.5
 
     def __post_init__(self) -> None:
-        for name in ("distance", "lost_after", "max_range", "reacquire_radius", "search_for"):
+        for name in (
+            "distance",
+            "lost_after",
+            "max_range",
+            "reacquire_radius",
+            "search_for",
+            "max_search_radius",
+        ):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
                 raise ValueError(f"FollowParams.{name} must be a positive number, got {v!r}")
-        for name in ("tolerance", "heading_tolerance", "max_prediction", "chase_short", "search_speed"):
+        for name in (
+            "tolerance",
+            "heading_tolerance",
+            "max_prediction",
+            "chase_short",
+            "search_speed",
+            "chase_for",
+        ):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
                 raise ValueError(f"FollowParams.{name} must be a number >= 0, got {v!r}")
@@ -219,15 +240,17 @@ class FollowMe:
             track = self._find_target(tracks, stamp)
         if track is not None and track.misses == 0:
             self._last_seen = float(stamp)
-        if stamp - self._last_seen >= self.params.lost_after:
-            return self._lose(LOST_MESSAGE)
-        if track is None:  # vanished, maybe round a corner: go and look where they were last
-            if self._chased:
-                return FollowStep(None, "following", self._target)
+        chase: Pose | None = None
+        if track is None and not self._chased:  # vanished, maybe round a corner: go and look
             self._chased = True
             last = (float(self._last_pos[0]), float(self._last_pos[1]))
             chase = goal_behind(last, pose, self.params.chase_short)
-            self._goal = chase
+        patience = self.params.lost_after + (self.params.chase_for if track is None else 0.0)
+        if stamp - self._last_seen >= patience:
+            return self._lose(LOST_MESSAGE)
+        if track is None:
+            if chase is not None:
+                self._goal = chase
             return FollowStep(chase, "following", self._target)
         self._chased = False
         self._last_pos = np.asarray(track.position, dtype=np.float64).copy()
@@ -267,8 +290,10 @@ class FollowMe:
         dt = min(max(0.0, stamp - self._last_seen), self.params.max_prediction)
         predicted = self._last_pos + dt * self._last_vel
         best: TrackState | None = None
-        unseen = min(max(0.0, stamp - self._last_seen), self.params.lost_after)
-        best_d = self.params.reacquire_radius + self.params.search_speed * unseen
+        unseen = max(0.0, stamp - self._last_seen)
+        best_d = min(
+            self.params.reacquire_radius + self.params.search_speed * unseen, self.params.max_search_radius
+        )
         for t in tracks:
             if t.misses > 0 or t.first_seen < self._last_seen:
                 continue  # only tracks born after the target was last seen can be it

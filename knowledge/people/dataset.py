@@ -378,3 +378,50 @@ def n_protocol_scans(legs_dir: Path, parts: Sequence[Part]) -> int:
         stop = part.stop if part.stop is not None else _n_scans(legs_dir / part.file)
         total += stop - part.first
     return total
+
+
+#: A segment whose centroid is this near (metres) an annotated person is one of their legs...
+PERSON_LEG_RADIUS = 0.3
+#: ...if it is at most this wide (C.6, metres): both legs and what stands beside them are not.
+PERSON_LEG_WIDTH = 0.45
+#: Segments farther than this (metres) from every annotated person are non-people.
+PERSON_CLEAR_RADIUS = 1.0
+
+
+def label_person_annotations(
+    features: FloatArray,
+    centroids: FloatArray,
+    people: FloatArray,
+    *,
+    arc_deg: tuple[float, float] | None = None,
+) -> npt.NDArray[np.int8]:
+    """Labels of one scan's segments from annotated *people* (not legs), as in the leg_tracker
+    benchmark bags: ``(S,)`` int8 POSITIVE / NEGATIVE / IGNORED.
+
+    ``features`` ``(S, 14)`` and ``centroids`` ``(S, 2)`` of the scan's segments (sensor
+    frame, metres); ``people`` ``(G, 2)`` the annotated people's positions (the midpoint of
+    their legs) in the same frame. A segment of at least two points is a positive when its
+    centroid lies within :data:`PERSON_LEG_RADIUS` of a person and it is at most
+    :data:`PERSON_LEG_WIDTH` wide; a negative when it is farther than
+    :data:`PERSON_CLEAR_RADIUS` from every person and (with ``arc_deg``) its bearing lies in
+    the annotated arc; everything else (wide segments at a person, segments between the two
+    radii, outside the arc) is ignored. The annotators marked everybody in the arc, so what is
+    not near a person there is not a person.
+    """
+    S = centroids.shape[0]
+    labels = np.full(S, IGNORED, dtype=np.int8)
+    if S == 0:
+        return labels
+    usable = features[:, 0] >= MIN_POINTS
+    if people.shape[0]:
+        d = np.hypot(centroids[:, None, 0] - people[None, :, 0], centroids[:, None, 1] - people[None, :, 1])
+        nearest = d.min(axis=1)
+    else:
+        nearest = np.full(S, np.inf)
+    in_arc = np.ones(S, dtype=bool)
+    if arc_deg is not None:
+        bearing = np.degrees(np.arctan2(centroids[:, 1], centroids[:, 0]))
+        in_arc = (bearing >= arc_deg[0]) & (bearing <= arc_deg[1])
+    labels[usable & in_arc & (nearest > PERSON_CLEAR_RADIUS)] = NEGATIVE
+    labels[usable & (nearest <= PERSON_LEG_RADIUS) & (features[:, 5] <= PERSON_LEG_WIDTH)] = POSITIVE
+    return labels

@@ -155,14 +155,24 @@ class LegDetector:
 
     # -- training / prediction -----------------------------------------------------------
 
-    def fit(self, X: npt.ArrayLike, y: npt.ArrayLike, *, training: Mapping[str, Any] | None = None) -> Self:
+    def fit(
+        self,
+        X: npt.ArrayLike,
+        y: npt.ArrayLike,
+        *,
+        training: Mapping[str, Any] | None = None,
+        sample_weight: npt.ArrayLike | None = None,
+    ) -> Self:
         """Learn from features ``X`` ``(n, 14)`` (all of C.1–C.14) and labels ``y`` ``(n,)`` (True = person).
 
         ``training`` is a JSON-able summary of the data, saved with the model.
+        ``sample_weight`` ``(n,)`` scales the booster's initial weights within each class.
         """
         self._check_params()
         A = self._select(X)
-        self.booster_ = GeneralizedAdaBoost(n_rounds=self.n_rounds, weak="threshold").fit(A, y)
+        self.booster_ = GeneralizedAdaBoost(n_rounds=self.n_rounds, weak="threshold").fit(
+            A, y, sample_weight=sample_weight
+        )
         self.training_ = dict(training or {})
         return self
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 __all__ = ["StaticCells", "StaticParams"]
@@ -34,77 +35,114 @@ class StaticParams:
         settle: seconds a cell must have been hit for its obstacle to count as static.
         forget: seconds without a hit after which a cell starts afresh.
         reach: metres around a point whose cells are looked at.
-        interval: seconds; scans closer than this to the last one remembered are skipped.
     """
 
     cell: float = 0.1
     settle: float = 3.0
     forget: float = 2.0
     reach: float = 0.1
-    interval: float = 0.1
 
     def __post_init__(self) -> None:
         for name in ("cell", "settle", "forget"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"StaticParams.{name} must be a positive number, got {v!r}")
-        for name in ("reach", "interval"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0):
-                raise ValueError(f"StaticParams.{name} must be >= 0, got {v!r}")
+        if not (math.isfinite(self.reach) and self.reach >= 0):
+            raise ValueError(f"StaticParams.reach must be >= 0 metres, got {self.reach!r}")
+
+
+#: Side of the table of cells (cells): a cell lives at (i mod SIZE, j mod SIZE), so two cells
+#: share a slot only when they are SIZE cells apart (51 m at 10 cm); the slot keeps the one
+#: hit last, and a cell whose slot holds another cell counts as never hit.
+SIZE = 512
+_EMPTY = np.iinfo(np.int64).min
 
 
 class StaticCells:
-    """The first and last hit time of each cell (see the module docstring); bounded by
-    ``forget``: cells not hit for that long are dropped (swept every ``forget`` seconds)."""
+    """The first and last hit time of each cell (see the module docstring), in a fixed table:
+    constant memory, no sorting; cells not hit for ``forget`` seconds are forgotten."""
 
     def __init__(self, params: StaticParams | None = None) -> None:
         self.params = params or StaticParams()
-        self._cells: dict[tuple[int, int], list[float]] = {}  # cell -> [first hit, last hit]
+        self._key = np.full((SIZE, SIZE), _EMPTY, dtype=np.int64)
+        self._first = np.zeros((SIZE, SIZE), dtype=np.float64)
+        self._last = np.full((SIZE, SIZE), -np.inf, dtype=np.float64)
         self._time = -math.inf
-        self._swept = -math.inf
 
     def __len__(self) -> int:
-        return len(self._cells)
+        """Cells hit within the last ``forget`` seconds."""
+        return int(np.count_nonzero(self._last >= self._time - self.params.forget))
 
     def update(self, points: np.ndarray, stamp: float) -> None:
-        """The scan at ``stamp`` hit ``points`` (``(k, 2)`` metres, tracking frame). Scans
-        closer than ``interval`` seconds to the last one taken change nothing (a 75 Hz laser
-        need not be remembered at 75 Hz to know what stood still for seconds)."""
-        prm = self.params
+        """The scan at ``stamp`` hit ``points`` (``(k, 2)`` metres, tracking frame)."""
+        pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 2))
         t = float(stamp)
-        if t - self._time < prm.interval:
-            return
-        pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        ij = np.floor(pts[np.isfinite(pts).all(axis=1)] / prm.cell).astype(np.int64)
-        cells = self._cells
-        stale = t - prm.forget
-        for key in set(zip(ij[:, 0].tolist(), ij[:, 1].tolist(), strict=True)):
-            rec = cells.get(key)
-            if rec is None or rec[1] < stale:
-                cells[key] = [t, t]
-            else:
-                rec[1] = t
-        if t - self._swept >= prm.forget:
-            self._cells = {k: v for k, v in cells.items() if v[1] >= stale}
-            self._swept = t
+        _update(pts, t, self.params.cell, self.params.forget, self._key, self._first, self._last)
         self._time = t
 
     def static(self, points: np.ndarray) -> np.ndarray:
         """``(k,)`` bool: a cell within ``reach`` of each point has been hit, without a break
         longer than ``forget``, for ``settle`` seconds up to the last update."""
         prm = self.params
-        pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        out = np.zeros(pts.shape[0], dtype=bool)
-        r = math.ceil(prm.reach / prm.cell)
-        stale, settled = self._time - prm.forget, self._time - prm.settle
-        for k, (i, j) in enumerate(np.floor(pts / prm.cell).astype(np.int64).tolist()):
-            for di in range(-r, r + 1):
-                for dj in range(-r, r + 1):
-                    rec = self._cells.get((i + di, j + dj))
-                    if rec is not None and rec[1] >= stale and rec[0] <= settled:
-                        out[k] = True
-                        break
-                if out[k]:
-                    break
+        pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 2))
+        out = np.zeros(pts.shape[0], dtype=np.bool_)
+        if pts.shape[0] and self._time != -math.inf:
+            r = math.ceil(prm.reach / prm.cell)
+            _static(
+                pts, self._time, prm.cell, prm.settle, prm.forget, r, self._key, self._first, self._last, out
+            )
         return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _key_of(i: int, j: int) -> int:
+    return (i << 32) | (j & 0xFFFFFFFF)
+
+
+@numba.njit(cache=True, nogil=True)
+def _update(
+    pts: np.ndarray,
+    t: float,
+    cell: float,
+    forget: float,
+    key: np.ndarray,
+    first: np.ndarray,
+    last: np.ndarray,
+) -> None:
+    """:meth:`StaticCells.update`: each finite point's cell is hit at ``t``; a cell not hit
+    within ``forget`` (or whose slot held another cell) starts afresh."""
+    for k in range(pts.shape[0]):
+        x, y = pts[k, 0], pts[k, 1]
+        if not (math.isfinite(x) and math.isfinite(y)):
+            continue
+        i, j = math.floor(x / cell), math.floor(y / cell)
+        kk = _key_of(i, j)
+        a, b = i % SIZE, j % SIZE
+        if not (key[a, b] == kk and last[a, b] >= t - forget):
+            first[a, b] = t
+        last[a, b] = t
+        key[a, b] = kk
+
+
+@numba.njit(cache=True, nogil=True)
+def _static(
+    pts: np.ndarray,
+    now: float,
+    cell: float,
+    settle: float,
+    forget: float,
+    r: int,
+    key: np.ndarray,
+    first: np.ndarray,
+    last: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """:meth:`StaticCells.static` into ``out`` (K,) bool."""
+    for k in range(pts.shape[0]):
+        i0, j0 = math.floor(pts[k, 0] / cell), math.floor(pts[k, 1] / cell)
+        for di in range(-r, r + 1):
+            for dj in range(-r, r + 1):
+                i, j = i0 + di, j0 + dj
+                a, b = i % SIZE, j % SIZE
+                if key[a, b] == _key_of(i, j) and now - first[a, b] >= settle and last[a, b] >= now - forget:
+                    out[k] = True

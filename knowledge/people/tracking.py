@@ -20,17 +20,33 @@ Each scan (:meth:`PeopleTracker.update`):
 3. associated tracks are corrected with their detection (Kalman update);
 4. births: every detection left over starts a *tentative* track (velocity 0, uncertain by
    ``init_speed_std``). It becomes *confirmed* — and only then gets its id and is reported —
-   after ``confirm_hits`` associated scans; a tentative track that misses ``tentative_misses``
-   scans in a row is dropped;
+   after ``confirm_hits`` associated scans, of which at least ``confirm_evidence`` had
+   *evidence* (the caller says which detections have it: e.g. the laser saw through that
+   place a moment before, :mod:`knowledge.people.freespace`, so someone walked in), or once
+   it has moved ``confirm_travel`` metres from where it was born (someone walking away from
+   the laser hides their own next position, so the laser never sees through it); a
+   tentative track that misses ``tentative_misses`` scans in a row is dropped. Detections
+   the caller marks as no *birth* (e.g. on cells the laser has hit for seconds: furniture,
+   :mod:`knowledge.people.static`) may feed confirmed tracks — a person who walked up and
+   stands still stays tracked — but neither start nor feed tentative ones;
 5. deaths: a confirmed track that misses more than ``max_misses`` scans in a row is deleted.
-   While it misses it coasts on its prediction (``misses > 0`` in its state).
+   While it misses it coasts on its prediction (``misses > 0`` in its state). Misses while
+   the caller says the predicted position is *occluded* (something nearer on the laser's
+   beam towards it: a passer-by, a door jamb the person turned round) do not count, for at
+   most ``max_occluded`` seconds since it was last seen: a person hidden for a moment keeps
+   their track (and follow-me its target).
 
-Ids are integers from 1, given in order of confirmation, never reused by one tracker.
+Ids are integers from 1, given in order of confirmation, never given to another person's
+track by one tracker; but a track confirmed within ``revive_radius`` metres of where a confirmed
+track was last seen, less than ``revive_for`` seconds after it vanished, *continues* that track
+with its id (the person stepped out of view, round a corner, behind someone, and back). It needs
+no evidence then: a person the laser saw walking a moment ago may stand still now.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,6 +67,11 @@ class TrackerConfig:
     accel_std: float = 2.0
     meas_std: float = 0.08
     init_speed_std: float = 1.0
+    confirm_evidence: int = 0
+    confirm_travel: float | None = None
+    max_occluded: float = 0.0
+    revive_radius: float = 0.0
+    revive_for: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("gate", "accel_std", "meas_std", "init_speed_std"):
@@ -61,6 +82,25 @@ class TrackerConfig:
             v = getattr(self, name)
             if int(v) != v or v < 1:
                 raise ValueError(f"TrackerConfig.{name} must be an integer >= 1, got {v!r}")
+        if self.confirm_travel is not None and not (
+            math.isfinite(self.confirm_travel) and self.confirm_travel > 0
+        ):
+            raise ValueError(
+                f"TrackerConfig.confirm_travel must be None or a positive number, got {self.confirm_travel!r}"
+            )
+        for name in ("revive_radius", "revive_for"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"TrackerConfig.{name} must be a number >= 0, got {v!r}")
+        if not (math.isfinite(self.max_occluded) and self.max_occluded >= 0):
+            raise ValueError(
+                f"TrackerConfig.max_occluded must be a number of seconds >= 0, got {self.max_occluded!r}"
+            )
+        v = self.confirm_evidence
+        if int(v) != v or not 0 <= v <= self.confirm_hits:
+            raise ValueError(
+                f"TrackerConfig.confirm_evidence must be an integer in 0..confirm_hits, got {v!r}"
+            )
 
 
 def cv_transition(dt: float) -> FloatArray:
@@ -158,6 +198,8 @@ class _Track:
     x0: float = 0.0  # where it was born
     y0: float = 0.0
     travelled: float = 0.0  # the farthest the corrected position has been from (x0, y0)
+    evidence: int = 0  # associated detections that had evidence (while tentative)
+    hidden: int = 0  # of the misses in a row, those while the predicted position was occluded
 
     def predict(self, dt: float, q00: float, q01: float, q11: float) -> None:
         """:func:`kalman_predict` over ``dt`` seconds with process noise ``[[q00, q01], [q01, q11]]`` per axis."""
@@ -234,6 +276,7 @@ class PeopleTracker:
     def __init__(self, config: TrackerConfig | None = None) -> None:
         self.config = config or TrackerConfig()
         self._tracks: list[_Track] = []
+        self._vanished: list[tuple[int, float, float, float]] = []  # id, x, y, last seen
         self._next_id = 1
         self._time: float | None = None
         self._noise: tuple[tuple[float, float], float, float, float] = ((math.nan, math.nan), 0.0, 0.0, 0.0)
@@ -246,6 +289,7 @@ class PeopleTracker:
     def reset(self) -> None:
         """Forget every track (ids keep counting up)."""
         self._tracks = []
+        self._vanished = []
         self._time = None
 
     def tracks(self, *, include_tentative: bool = False) -> list[TrackState]:
@@ -278,6 +322,21 @@ class PeopleTracker:
             for k, t in enumerate(sel)
         ]
 
+    def _revive(self, tr: _Track, t: float) -> int:
+        """The id of the vanished confirmed track that ``tr`` continues (0: none): the nearest
+        within ``revive_radius`` of ``tr``'s birth place that vanished less than ``revive_for``
+        seconds ago and was last seen before ``tr`` was born."""
+        cfg = self.config
+        self._vanished = [v for v in self._vanished if t - v[3] <= cfg.revive_for]
+        best, best_d = -1, cfg.revive_radius
+        for k, (_, x, y, seen) in enumerate(self._vanished):
+            d = math.hypot(tr.x0 - x, tr.y0 - y)
+            if seen < tr.born and d <= best_d:
+                best, best_d = k, d
+        if best < 0:
+            return 0
+        return self._vanished.pop(best)[0]
+
     def _process_noise(self, dt: float) -> tuple[float, float, float]:
         """The per-axis block ``(q00, q01, q11)`` of :func:`cv_process_noise` over ``dt``
         (cached: scans mostly come at a fixed rate)."""
@@ -287,8 +346,24 @@ class PeopleTracker:
             self._noise = (key, float(Q[0, 0]), float(Q[0, 2]), float(Q[2, 2]))
         return self._noise[1:]
 
-    def update(self, detections: npt.ArrayLike, t: float) -> list[TrackState]:
-        """Advance to time ``t`` (seconds) with person positions ``(K, 2)``; returns the confirmed tracks."""
+    def update(
+        self,
+        detections: npt.ArrayLike,
+        t: float,
+        *,
+        evidence: npt.ArrayLike | None = None,
+        births: npt.ArrayLike | None = None,
+        occluded: Callable[[FloatArray], npt.ArrayLike] | None = None,
+    ) -> list[TrackState]:
+        """Advance to time ``t`` (seconds) with person positions ``(K, 2)``; returns the confirmed tracks.
+
+        ``evidence`` ``(K,)`` bool: the detections that count towards ``confirm_evidence``
+        (None: all). ``births`` ``(K,)`` bool: the detections that may start or feed a
+        tentative track (None: all); the others can only feed confirmed tracks. ``occluded``:
+        given the predicted positions ``(M, 2)`` of the confirmed tracks that missed this scan,
+        says ``(M,)`` bool which of them something nearer hides from the sensor (see
+        ``max_occluded``).
+        """
         Z = (
             np.asarray(detections, dtype=np.float64).reshape(-1, 2)
             if np.size(detections)
@@ -296,6 +371,11 @@ class PeopleTracker:
         )
         if not np.isfinite(Z).all():
             raise ValueError("detections must be finite (K, 2) positions in metres")
+        K0 = Z.shape[0]
+        ev = np.ones(K0, dtype=bool) if evidence is None else np.asarray(evidence, dtype=bool).reshape(-1)
+        may = np.ones(K0, dtype=bool) if births is None else np.asarray(births, dtype=bool).reshape(-1)
+        if ev.shape != (K0,) or may.shape != (K0,):
+            raise ValueError(f"evidence and births must be ({K0},) bool, one per detection")
         if not math.isfinite(t):
             raise ValueError(f"t must be a finite time in seconds, got {t!r}")
         cfg = self.config
@@ -319,7 +399,9 @@ class PeopleTracker:
             group = [tr for tr in self._tracks if (tr.id > 0) == confirmed]
             if not group:
                 continue
-            cand = [k for k in range(K) if free[k]]
+            cand = [k for k in range(K) if free[k] and (confirmed or may[k])]
+            if not cand:
+                continue
             dist = [[math.hypot(tr.px - zs[k][0], tr.py - zs[k][1]) for k in cand] for tr in group]
             for row, col in _assign(dist, cfg.gate):
                 tr = group[row]
@@ -327,33 +409,54 @@ class PeopleTracker:
                 tr.correct(zs[k][0], zs[k][1], r)
                 tr.travelled = max(tr.travelled, math.hypot(tr.px - tr.x0, tr.py - tr.y0))
                 tr.hits += 1
+                tr.evidence += int(ev[k])
                 tr.misses = 0
                 tr.last_seen = t
                 free[k] = False
                 n_free -= 1
                 seen.add(id(tr))
+        hidden: set[int] = set()
+        if occluded is not None and cfg.max_occluded > 0:
+            missing = [tr for tr in self._tracks if tr.id > 0 and id(tr) not in seen]
+            if missing:
+                flags = np.asarray(occluded(np.array([(tr.px, tr.py) for tr in missing])), dtype=bool)
+                hidden = {id(tr) for tr, f in zip(missing, flags.reshape(-1).tolist(), strict=True) if f}
         survivors: list[_Track] = []
         for tr in self._tracks:
             if id(tr) not in seen:
                 tr.misses += 1
+                tr.hidden += id(tr) in hidden
+            else:
+                tr.hidden = 0
             tr.age += 1
             if tr.id > 0:
-                if tr.misses <= cfg.max_misses:
+                if tr.misses - tr.hidden <= cfg.max_misses and (
+                    tr.hidden == 0 or t - tr.last_seen <= cfg.max_occluded
+                ):
                     survivors.append(tr)
+                elif cfg.revive_radius > 0:
+                    self._vanished.append((tr.id, tr.px, tr.py, tr.last_seen))
             elif tr.misses < cfg.tentative_misses:
                 if tr.hits >= cfg.confirm_hits:
-                    tr.id = self._next_id
-                    self._next_id += 1
+                    revived = self._revive(tr, t)
+                    if revived:
+                        tr.id = revived
+                    elif tr.evidence >= cfg.confirm_evidence or (
+                        cfg.confirm_travel is not None and tr.travelled >= cfg.confirm_travel
+                    ):
+                        tr.id = self._next_id
+                        self._next_id += 1
                 survivors.append(tr)
         if n_free:
             p0 = cfg.meas_std**2
             v0 = cfg.init_speed_std**2
             for k in range(K):
-                if not free[k]:
+                if not (free[k] and may[k]):
                     continue
                 x, y = zs[k]
                 tr = _Track(x, y, 0.0, 0.0, p0, 0.0, v0, p0, 0.0, v0, born=t, last_seen=t, x0=x, y0=y)
-                if cfg.confirm_hits <= 1:
+                tr.evidence = int(ev[k])
+                if cfg.confirm_hits <= 1 and tr.evidence >= cfg.confirm_evidence:
                     tr.id = self._next_id
                     self._next_id += 1
                 survivors.append(tr)

@@ -50,17 +50,17 @@ unit: $(STAMP)
 test: lint typecheck unit
 
 eval: $(STAMP)
-	$(BIN)/python -m agent.tools.evaluate_places --out docs/results
-	$(BIN)/python -m agent.tools.evaluate_topology --out docs/results
-	$(BIN)/python -m agent.tools.evaluate_real_logs --out docs/results
-	$(BIN)/python -m agent.tools.evaluate_people_tracks --out docs/results
-	$(BIN)/python -m agent.tools.evaluate_follow --seeds 0-7 --out docs/results
+	$(BIN)/python -m tools.evaluate_places --out docs/results
+	$(BIN)/python -m tools.evaluate_topology --out docs/results
+	$(BIN)/python -m tools.evaluate_real_logs --out docs/results
+	$(BIN)/python -m tools.evaluate_people_tracks --out docs/results
+	$(BIN)/python -m tools.evaluate_follow --seeds 0-7 --out docs/results
 
 bench: $(BENCH_STAMP)
-	$(BIN)/python -m agent.tools.bench --out docs/results
+	$(BIN)/python -m tools.bench --out docs/results
 
 clean:
 	rm -rf $(VENV) $(OUT) build *.egg-info
 
 fuzz: $(STAMP)
-	$(BIN)/python -m agent.tools.fuzz
+	$(BIN)/python -m tools.fuzz

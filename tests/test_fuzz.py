@@ -1,4 +1,4 @@
-"""The reliability probes of agent/tools/fuzz.py, short (``make fuzz`` runs them long): every bus
+"""The reliability probes of tools/fuzz.py, short (``make fuzz`` runs them long): every bus
 decoder on random, cut, mutated, deeply nested and huge payloads; the SICK parser on mutated
 telegrams and random bytes; the serial line unplugged and plugged back (issue 18)."""
 
@@ -10,8 +10,8 @@ import pytest
 from agent.bus.codecs import codec_for
 from agent.bus.keys import STREAMS
 from agent.bus.schemas import SCHEMAS
-from agent.tools.fuzz import SAMPLES, decoder_inputs, fuzz_decoders, fuzz_sick, replug_cycles, sample_payload
 from knowledge.errors import ProtocolError
+from tools.fuzz import SAMPLES, decoder_inputs, fuzz_decoders, fuzz_sick, replug_cycles, sample_payload
 
 VIEW_ONLY = {"foxglove.SceneUpdate", "foxglove.FrameTransform"}  # encoded, never decoded
 

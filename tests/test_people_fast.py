@@ -734,7 +734,7 @@ def detector() -> LegDetector:
 def test_pipeline_equals_the_reference_on_the_agents_drive(detector: LegDetector) -> None:
     """The agent benchmark's drive (furniture legs that become tracks): detections, features
     and tracks of the new pipeline equal the reference chain's, scan by scan."""
-    from agent.tools.bench_agent import DriveScans
+    from sim.drives import DriveScans
 
     drive = DriveScans()
     chunk = drive.take(250)

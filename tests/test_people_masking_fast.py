@@ -19,11 +19,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.core.pipeline import PeopleParams, is_full_turn
-from agent.tools.bench_agent import DriveScans
 from knowledge.people.detector import SegmentDetection
 from knowledge.people.masking import fill_masked, free_standing, person_beams, unknown_masked
 from knowledge.people.pipeline import PeoplePipeline
 from knowledge.people.segmentation import BoolArray, FloatArray, has_return, segment_scan
+from sim.drives import DriveScans
 from sim.lms_world import ray_circle_ranges
 
 # ------------------------------------------------------------------------------ the reference

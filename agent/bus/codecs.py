@@ -17,7 +17,7 @@ The last two are for viewing only: they are encoded, never decoded.
 Every decoder checks the payload's size before parsing (:data:`MAX_SCAN_BYTES`,
 :data:`MAX_POSE_BYTES`, :data:`MAX_FRAME_BYTES`; JSON: :mod:`agent.bus.schemas`) and raises
 :class:`ProtocolError`, never another exception, on any input
-(``python -m agent.tools.fuzz``, docs/results/reliability.md).
+(``python -m tools.fuzz``, docs/results/reliability.md).
 
 Fields Foxglove has no slot for travel as extra protobuf fields numbered from 1001, which
 protobuf readers (Foxglove's included) skip: a scan's ``seq`` (1001, varint), ``range_min``

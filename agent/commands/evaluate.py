@@ -253,7 +253,7 @@ def _evaluate_log(args: argparse.Namespace) -> int:
         **scores.as_dict(),
     }
     if args.out_dir is not None:
-        from agent.core.mapviz import render_layered_map
+        from agent.core.mapviz import draw_doors, render_layered_map
         from knowledge.evaluation.real_logs import match_stamps
 
         d = args.out_dir
@@ -273,7 +273,7 @@ def _evaluate_log(args: argparse.Namespace) -> int:
             title=f"{args.recording.name}: dot = predicted label, ring = true label; doors: green found, "
             "red missed, grey not driven through, violet room to room",
         )
-        _draw_doors(lm, truth, graph, scores.doors)
+        draw_doors(lm, truth, graph, scores.doors)
         from knowledge.fileio import write_image
 
         write_image(d / "evaluation.png", lm.image)
@@ -284,26 +284,3 @@ def _evaluate_log(args: argparse.Namespace) -> int:
         if args.out_dir is not None:
             print(f"wrote {args.out_dir}/scores.json, evaluation.png, places.jsonl, graph.json, areas.json")
     return 0
-
-
-def _draw_doors(lm: Any, truth: Truth, graph: dict[str, Any], doors: dict[str, Any]) -> None:
-    """Circles of ``door_radius`` at the labelled doors and a cross on each false doorway node."""
-    import cv2
-
-    missed = {m["id"] for m in doors["missed"]}
-    false = set(doors["false"])
-    radius = max(3, round(doors["radius"] / lm.grid.resolution * lm.scale))
-    for door in truth.doors:
-        if not door.driven:
-            colour = (150, 150, 150)
-        elif door.room_to_room:
-            colour = (200, 60, 160)
-        else:
-            colour = (40, 40, 220) if door.id in missed else (40, 160, 40)
-        cv2.circle(lm.image, lm.px(*door.center, frame="odom"), radius, colour, 2, cv2.LINE_AA)
-    for n in graph["nodes"]:
-        if n["id"] in false:
-            x, y = lm.px(n["x"], n["y"], frame="odom")
-            k = max(4, radius // 2)
-            cv2.line(lm.image, (x - k, y - k), (x + k, y + k), (0, 0, 0), 2, cv2.LINE_AA)
-            cv2.line(lm.image, (x - k, y + k), (x + k, y - k), (0, 0, 0), 2, cv2.LINE_AA)

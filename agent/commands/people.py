@@ -21,22 +21,13 @@ import argparse
 import functools
 import json
 import math
-import os
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
 from agent.commands.options import positive_float, positive_int
-
-#: The repository root (agent/commands/people.py → two levels up).
-REPO = Path(__file__).resolve().parents[2]
-
-
-def default_data_dir() -> Path:
-    """``$LOCI_DATA``, else ``../shared/data`` beside the repository."""
-    env = os.environ.get("LOCI_DATA")
-    return Path(env) if env else REPO.parent / "shared" / "data"
+from agent.datasets import data_dir
 
 
 def register(subparsers: Any) -> None:
@@ -231,7 +222,7 @@ def _progress(total: int, desc: str) -> Any:
 def _examples(args: argparse.Namespace, split: str, jump: float, max_gap: int | None = None) -> Any:
     from knowledge.people import dataset as ds
 
-    legs_dir = ds.find_legs_dir(args.data if args.data is not None else default_data_dir())
+    legs_dir = ds.find_legs_dir(args.data if args.data is not None else data_dir())
     parts = ds.protocol_parts(split, legs_dir, max_scans=args.max_scans)
     total = ds.n_protocol_scans(legs_dir, parts)
     ex = ds.build_examples(

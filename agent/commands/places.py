@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import os
 import sys
 import time
 from pathlib import Path
@@ -13,15 +12,9 @@ from typing import Any
 
 from agent.commands.options import emit_json, pct
 from agent.commands.topology import register_topology_commands
+from agent.datasets import data_dir
 
 log = logging.getLogger("loci.places")
-
-#: Where the real data lives by default: ``../shared/data`` beside the repository.
-REPO = Path(__file__).resolve().parents[2]
-
-
-def default_data_dir() -> Path:
-    return Path(os.environ.get("LOCI_DATA", REPO.parent / "shared" / "data"))
 
 
 # ---------------------------------------------------------------------------- arguments
@@ -88,7 +81,7 @@ def _load_maps(args: argparse.Namespace, progress: Any) -> list[Any]:
     for m, lab in zip(args.map, args.labels, strict=True):
         maps.append(load_labelled_map(m, lab, resolution=args.resolution, codes=args.codes))
     names = list(IPA_BUILDINGS) if "all" in args.ipa else args.ipa
-    data = args.data or default_data_dir()
+    data = args.data or data_dir()
     for b in names:
         if b not in IPA_BUILDINGS:
             raise SystemExit(

@@ -30,7 +30,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
@@ -40,7 +40,10 @@ from knowledge.fileio import write_image
 from knowledge.labels import CLASS_CODES, CLASS_COLORS_BGR, CLASS_NAMES, DOORWAY
 from knowledge.metric.grid import OccupancyGrid
 
-__all__ = ["LayeredMap", "area_caption", "class_colour", "render_layered_map"]
+if TYPE_CHECKING:
+    from knowledge.evaluation.real_logs import Truth
+
+__all__ = ["LayeredMap", "area_caption", "class_colour", "draw_doors", "render_layered_map"]
 
 Colour = tuple[int, int, int]
 
@@ -394,3 +397,27 @@ def _legend(img: np.ndarray, y: int) -> None:
         TEXT,
         1,
     )
+
+
+def draw_doors(lm: LayeredMap, truth: Truth, graph: Mapping[str, Any], doors: Mapping[str, Any]) -> None:
+    """An evaluation's doors on a layered map (:func:`knowledge.evaluation.real_logs.evaluate`'s
+    ``doors``): a circle of the match radius at each labelled door (green found, red missed,
+    grey not driven through, violet room to room) and a cross on each false doorway node."""
+
+    missed = {m["id"] for m in doors["missed"]}
+    false = set(doors["false"])
+    radius = max(3, round(doors["radius"] / lm.grid.resolution * lm.scale))
+    for door in truth.doors:
+        if not door.driven:
+            colour = (150, 150, 150)
+        elif door.room_to_room:
+            colour = (200, 60, 160)
+        else:
+            colour = (40, 40, 220) if door.id in missed else (40, 160, 40)
+        cv2.circle(lm.image, lm.px(*door.center, frame="odom"), radius, colour, 2, cv2.LINE_AA)
+    for n in graph["nodes"]:
+        if n["id"] in false:
+            x, y = lm.px(n["x"], n["y"], frame="odom")
+            k = max(4, radius // 2)
+            cv2.line(lm.image, (x - k, y - k), (x + k, y + k), (0, 0, 0), 2, cv2.LINE_AA)
+            cv2.line(lm.image, (x - k, y + k), (x + k, y - k), (0, 0, 0), 2, cv2.LINE_AA)

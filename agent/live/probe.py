@@ -5,7 +5,7 @@ server's ``advertise``, subscribes to topics, and decodes each binary ``messageD
 with the schema the server advertised for its channel — protobuf messages through Google's
 protobuf runtime built from the advertised ``FileDescriptorSet`` (not through this
 project's codecs), JSON messages with :func:`json.loads`. The tests, ``bench_live`` and
-``python -m agent.tools.live_snapshot`` (the picture in docs/foxglove.md) use it.
+``python -m tools.live_snapshot`` (the picture in docs/foxglove.md) use it.
 
 Needs the ``websockets`` and ``protobuf`` packages (the ``dev`` extra).
 """

@@ -10,7 +10,7 @@ graph or the areas changed, :meth:`LiveView.on_say` for each line of the convers
 Cost: the server's listener counts the subscriptions (it runs on the SDK's threads); while
 no client subscribes to anything, each call returns after one integer test, so a robot
 with the live view on but nobody watching pays nothing measurable
-(``agent/tools/bench_live.py``). With clients, only the channels someone subscribed to are
+(``tools/bench_live.py``). With clients, only the channels someone subscribed to are
 encoded (``has_sinks``). The SDK queues what a slow client cannot take and drops its oldest
 data messages (``message_backlog_size``), so a slow viewer never holds up the agent.
 

@@ -6,7 +6,7 @@ black occupied, grey unknown) with the place labels overlaid (room blue, corrido
 doorway red, hallway green), door bars and furniture outlines; pictures above ~200 KB are
 scaled down.
 
-    python -m agent.tools.render_buildings [--out docs/img] [--seed-offset 0]
+    python -m tools.render_buildings [--out docs/img] [--seed-offset 0]
 """
 
 from __future__ import annotations

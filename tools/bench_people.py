@@ -10,7 +10,7 @@ so that the static cells and the free-space evidence run as in the agent.
 Scans: the legs data's TEST split scans (positive_6, the rear laser's negative_2 test scans)
 when the data folder is there, else scans of simulated people walking in a ray-cast room.
 
-    python -m agent.tools.bench_people [--data DIR] [--scans 600] [--json]
+    python -m tools.bench_people [--data DIR] [--scans 600] [--json]
 """
 
 from __future__ import annotations
@@ -189,11 +189,9 @@ def run(data: Path | None = None, *, n_scans: int = 600, warmup: int = 20) -> di
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    from agent.commands.people import default_data_dir
+    from agent.datasets import data_dir
 
-    ap = argparse.ArgumentParser(
-        prog="python -m agent.tools.bench_people", description=__doc__.split("\n\n")[0]
-    )
+    ap = argparse.ArgumentParser(prog="python -m tools.bench_people", description=__doc__.split("\n\n")[0])
     ap.add_argument(
         "--data", type=Path, help="the shared data folder (default: $LOCI_DATA or ../shared/data)"
     )
@@ -201,7 +199,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--scans", type=int, default=600, help="scans to time (default: 600)")
     ap.add_argument("--json", action="store_true", help="print the result as JSON")
     args = ap.parse_args(argv)
-    data = None if args.sim else (args.data or default_data_dir())
+    data = None if args.sim else (args.data or data_dir())
     r = run(data, n_scans=args.scans)
     if args.json:
         print(json.dumps(r))

@@ -15,7 +15,7 @@ Per scan it reports the time of the pipeline and of the live view's calls (p50, 
 whole per-scan path's p99 against the agent's 5 ms target. The occupancy grid is sent at
 most once a second (``grid_period``), as in the agent.
 
-    python -m agent.tools.bench_live [--scans N] [--json]
+    python -m tools.bench_live [--scans N] [--json]
 """
 
 from __future__ import annotations
@@ -78,7 +78,7 @@ class Watcher:
         self.received = 0
         self.topics: list[str] = []
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "agent.tools.bench_live", "--watch", url],
+            [sys.executable, "-m", "tools.bench_live", "--watch", url],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
         )  # fmt: skip
 

@@ -13,7 +13,7 @@ association, the pipeline with people on, navigation graph and areas). Measured:
 
 Without ``../shared/data`` (or ``$LOCI_DATA``) it says so and exits 2.
 
-    python -m agent.tools.bench_replay [--scans N] [--json FILE]
+    python -m tools.bench_replay [--scans N] [--json FILE]
 """
 
 from __future__ import annotations
@@ -29,7 +29,9 @@ from typing import Any
 
 import numpy as np
 
-DATA = Path(os.environ.get("LOCI_DATA", Path(__file__).resolve().parents[2].parent / "shared" / "data"))
+from agent.datasets import data_dir
+
+DATA = data_dir()
 LOG = "logs/freiburg-079-corrected.log.gz"
 RATE_HZ = 75.0
 
@@ -71,9 +73,7 @@ def per_scan(path: Path, model: Any, people: bool, limit: int | None) -> np.ndar
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(
-        prog="python -m agent.tools.bench_replay", description=__doc__.split("\n\n")[0]
-    )
+    ap = argparse.ArgumentParser(prog="python -m tools.bench_replay", description=__doc__.split("\n\n")[0])
     ap.add_argument(
         "--scans", type=int, default=None, help="time only the first N scans per scan (default all)"
     )

@@ -15,7 +15,7 @@ with the graph, the JSON document and the pictures. Peak memory is traced per st
 (``tracemalloc``: numpy and OpenCV output arrays; OpenCV's internal buffers are not seen) and the
 process's peak resident size is reported at the end.
 
-    python -m agent.tools.bench_topology [--map PATH] [--model M | --synthetic] [--iterations 50]
+    python -m tools.bench_topology [--map PATH] [--model M | --synthetic] [--iterations 50]
                                          [--no-baseline] [--json OUT]
 """
 
@@ -34,6 +34,7 @@ from typing import Any, TypeVar
 import cv2
 import numpy as np
 
+from agent.datasets import data_dir
 from knowledge.fileio import atomic_write_text
 from knowledge.labels import CORRIDOR, DOORWAY, ROOM
 from knowledge.metric.grid import OccupancyGrid
@@ -50,9 +51,7 @@ from knowledge.topology.regions import CorrectionThresholds, correct_regions, ex
 from knowledge.topology.segmentation_score import score
 from knowledge.topology.topomap import draw_graph, draw_regions, dumps, map_background, topomap_document
 
-DEFAULT_MAP = (
-    Path(__file__).resolve().parents[2].parent / "shared" / "data" / "ipa" / "segmentation" / "office_g.png"
-)
+DEFAULT_MAP = data_dir() / "ipa" / "segmentation" / "office_g.png"
 RESOLUTION = 0.05
 CLASSES = (ROOM, CORRIDOR, DOORWAY)
 
@@ -239,7 +238,7 @@ def format_result(r: dict[str, Any]) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     doc = (__doc__ or "").split("\n")[0]
-    parser = argparse.ArgumentParser(prog="python -m agent.tools.bench_topology", description=doc)
+    parser = argparse.ArgumentParser(prog="python -m tools.bench_topology", description=doc)
     parser.add_argument("--map", type=Path, default=None, help=f"map image (default: {DEFAULT_MAP})")
     parser.add_argument(
         "--model", type=Path, default=None, help="place model for real histograms (default: the bundled one)"
@@ -261,7 +260,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     r = run(args.map, iterations=args.iterations, baseline=not args.no_baseline, model=model, model_name=name)
     print(format_result(r))
     if args.json:
-        cmd = "python -m agent.tools.bench_topology " + " ".join(argv if argv is not None else sys.argv[1:])
+        cmd = "python -m tools.bench_topology " + " ".join(argv if argv is not None else sys.argv[1:])
         atomic_write_text(args.json, json.dumps({"command": cmd.strip(), **r}, indent=2) + "\n")
     return 0
 

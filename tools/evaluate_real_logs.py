@@ -13,7 +13,7 @@ Freiburg 079 (SLAM-corrected poses, per-scan labels and the labelled map) is sco
 CSAIL (raw odometry, no labels) and the leg_tracker bag (people walking, no place labels) are
 replayed for the accounting and the share of scans with masked beams.
 
-Run: ``python -m agent.tools.evaluate_real_logs --out docs/results`` (``make eval``; about
+Run: ``python -m tools.evaluate_real_logs --out docs/results`` (``make eval``; about
 five minutes on 2 cores). Writes ``real_logs.md``, ``real_logs.json`` and
 ``real_logs_fr079.png``.
 """
@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import tempfile
 import time
@@ -34,9 +33,9 @@ from typing import Any
 import cv2
 import numpy as np
 
-from agent.commands.evaluate import _draw_doors
-from agent.core.mapviz import render_layered_map
+from agent.core.mapviz import draw_doors, render_layered_map
 from agent.core.pipeline import PeopleParams, PipelineParams, StepResult, areas_message, graph_message
+from agent.datasets import data_dir
 from agent.recording.carmen import CarmenOptions
 from agent.recording.importer import import_log
 from agent.recording.offline import replay_recording
@@ -46,7 +45,7 @@ from knowledge.metric.mapping import ScanMapper
 from knowledge.navigation.doorways import DoorwayParams
 from knowledge.places.model import PlaceModel, default_model_path
 
-DATA = Path(os.environ.get("LOCI_DATA", Path(__file__).resolve().parents[2].parent / "shared" / "data"))
+DATA = data_dir()
 
 MASKING = {
     "off": PeopleParams(enabled=False),
@@ -134,7 +133,7 @@ HEAD = (
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
-        prog="python -m agent.tools.evaluate_real_logs", description=__doc__.split("\n\n")[0]
+        prog="python -m tools.evaluate_real_logs", description=__doc__.split("\n\n")[0]
     )
     ap.add_argument("--out", type=Path, default=Path("docs/results"))
     ap.add_argument("--model", type=Path, default=None, help="the place model (default: the bundled one)")
@@ -198,12 +197,12 @@ def main(argv: list[str] | None = None) -> int:
             title="Freiburg 079: dot = predicted, ring = true label; doors: green found, red missed, "
             "grey not driven through, violet room to room; x = false doorway node",
         )
-        _draw_doors(lm, truth, r["graph"], s.doors)
+        draw_doors(lm, truth, r["graph"], s.doors)
         write_image(args.out / "real_logs_fr079.png", lm.image)
         lines += [
             "# The agent on real robot logs",
             "",
-            "Made by `python -m agent.tools.evaluate_real_logs --out docs/results` (`make eval`). "
+            "Made by `python -m tools.evaluate_real_logs --out docs/results` (`make eval`). "
             "Each log is imported with `loci import`, replayed through the agent's pipeline with the "
             "front laser only (the rear half of each 360° scan from the local map, Sect. 3.5) and scored "
             "as `loci evaluate log` scores it (docs/real_logs.md says what each number means). Place "

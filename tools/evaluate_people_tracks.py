@@ -24,7 +24,7 @@ Rows:
 * **retrained detector**: the legs data's TRAIN split plus the other part of the bag
   (``loci people train --bag``), weights 1 and 5, scored on the held-out part.
 
-Run: ``python -m agent.tools.evaluate_people_tracks --out docs/results`` (``make eval``;
+Run: ``python -m tools.evaluate_people_tracks --out docs/results`` (``make eval``;
 about three minutes on 2 cores). Writes ``people_tracks.md`` and ``people_tracks.json``.
 """
 
@@ -33,7 +33,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
 import tempfile
 import time
@@ -43,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from agent.datasets import data_dir
 from agent.people_tracks import TrackRun, bag_examples, read_annotations, score_tracks, track_recording
 from agent.recording.importer import import_log
 from knowledge.fileio import atomic_write_text
@@ -51,7 +51,7 @@ from knowledge.people.detector import LegDetector
 from knowledge.people.pipeline import PeoplePipeline
 from knowledge.people.tracking import TrackerConfig
 
-DATA = Path(os.environ.get("LOCI_DATA", Path(__file__).resolve().parents[2].parent / "shared" / "data"))
+DATA = data_dir()
 BAG = "people/general_tracking_moving_1.bag.zip"
 CUT = 36.0
 PARTS = {
@@ -167,13 +167,13 @@ def main(argv: list[str] | None = None) -> int:
     lines += [
         "# People tracks on the leg_tracker benchmark bag",
         "",
-        "Made by `python -m agent.tools.evaluate_people_tracks --out docs/results` (`make eval`); the",
+        "Made by `python -m tools.evaluate_people_tracks --out docs/results` (`make eval`); the",
         "bag is `../shared/data/people/general_tracking_moving_1.bag.zip`. Every track row is the same as",
         "`loci people track BAG --out T.jsonl` (`--plain` for the first rows) followed by",
         "`loci people evaluate-tracks T.jsonl --truth BAG [--window 0 36 | --window 36 1000]`.",
         "Scored as the benchmark's scorer does: CLEAR-MOT at 0.75 m per scan in the laser's frame,",
         "people and tracks between −80° and 12°, the tracks seen in the scan. The bundled leg",
-        "detector never saw the bag; the parts are explained in `agent/tools/evaluate_people_tracks.py`.",
+        "detector never saw the bag; the parts are explained in `tools/evaluate_people_tracks.py`.",
         "",
         f'Published joint-leg tracker on the whole "Moving" data (this bag and a second one, about '
         f"{P['frames_about']} scans): {P['objects']} annotated, {P['valid']} valid, {P['id_switches']} switches, "
@@ -230,9 +230,9 @@ def main(argv: list[str] | None = None) -> int:
         )
     lines += [
         "",
-        "Time per scan is measured by `python -m agent.tools.bench_people` (docs/people.md, Benchmark).",
+        "Time per scan is measured by `python -m tools.bench_people` (docs/people.md, Benchmark).",
         "Follow-me on the guided tour's seeds in the simulator: [follow_tour.md](follow_tour.md)",
-        "(`python -m agent.tools.evaluate_follow --seeds 0-7 --out docs/results`).",
+        "(`python -m tools.evaluate_follow --seeds 0-7 --out docs/results`).",
         "",
     ]
     args.out.mkdir(parents=True, exist_ok=True)

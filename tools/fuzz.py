@@ -14,7 +14,7 @@ Three probes, each a function the tests run briefly and ``make fuzz`` runs long:
 * :func:`replug_cycles` — the virtual LMS on a real pty, unplugged and plugged back ``n``
   times; the seconds from each return of the device to the first new scan.
 
-    python -m agent.tools.fuzz [--telegrams 1000000] [--chunks 1000000] [--messages 10000]
+    python -m tools.fuzz [--telegrams 1000000] [--chunks 1000000] [--messages 10000]
                                [--replugs 30] [--seed 0] [--json]
 
 prints the figures docs/results/reliability.md quotes (``make fuzz``).
@@ -413,7 +413,7 @@ def replug_cycles(n: int = 30, *, away: float = 0.4, limit: float = 2.0, seed: i
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(
-        prog="python -m agent.tools.fuzz",
+        prog="python -m tools.fuzz",
         description="Reliability probes: the SICK parser, every bus decoder, serial replug (make fuzz).",
     )
     p.add_argument("--telegrams", type=int, default=1_000_000, help="mutated telegrams (default 1,000,000)")

@@ -5,7 +5,7 @@ slow reference implementation, scikit-learn, the line rate, ...). This driver ru
 one after the other (never in parallel: they would disturb each other), saves each one's
 JSON beside its printed report, and writes ``bench.md`` with the commands and the reports.
 
-Run: ``make bench`` or ``python -m agent.tools.bench --out docs/results``.
+Run: ``make bench`` or ``python -m tools.bench --out docs/results``.
 """
 
 from __future__ import annotations
@@ -23,40 +23,40 @@ from knowledge.fileio import atomic_write_text
 
 #: (name, module, extra arguments, what it measures)
 BENCHMARKS: list[tuple[str, str, list[str], str]] = [
-    ("raycast", "agent.tools.bench_raycast", [], "ray casting: rays per second vs the reference caster"),
-    ("features", "agent.tools.bench_features", [], "scan features: vectors per second vs the reference"),
+    ("raycast", "tools.bench_raycast", [], "ray casting: rays per second vs the reference caster"),
+    ("features", "tools.bench_features", [], "scan features: vectors per second vs the reference"),
     (
         "labeling",
-        "agent.tools.bench_labeling",
+        "tools.bench_labeling",
         [],
         "whole-map labeling of lab_intel (target ≤ 10 s, one core)",
     ),
-    ("boosting", "agent.tools.bench_boosting", [], "AdaBoost training vs scikit-learn (target ≥ 5×)"),
-    ("topology", "agent.tools.bench_topology", [], "relaxation and regions on office_g"),
-    ("sick", "agent.tools.bench_sick", [], "SICK telegram codec vs the 500 kbaud line rate"),
-    ("people", "agent.tools.bench_people", [], "leg detection per 768-beam scan vs 75 Hz"),
+    ("boosting", "tools.bench_boosting", [], "AdaBoost training vs scikit-learn (target ≥ 5×)"),
+    ("topology", "tools.bench_topology", [], "relaxation and regions on office_g"),
+    ("sick", "tools.bench_sick", [], "SICK telegram codec vs the 500 kbaud line rate"),
+    ("people", "tools.bench_people", [], "leg detection per 768-beam scan vs 75 Hz"),
     (
         "conceptual",
-        "agent.tools.bench_conceptual",
+        "tools.bench_conceptual",
         [],
         "the conceptual map: a new object to the inferred room type (target ≤ 2 s), answers from the cache (≤ 100 ms)",
     ),
-    ("objects", "agent.tools.bench_objects", [], "object recognition: rendered views of the tour's objects"),
+    ("objects", "tools.bench_objects", [], "object recognition: rendered views of the tour's objects"),
     (
         "agent",
-        "agent.tools.bench_agent",
+        "tools.bench_agent",
         [],
         "the agent per scan: latency telegram → place (target p99 < 5 ms), sustained rate, memory over an hour",
     ),
     (
         "live",
-        "agent.tools.bench_live",
+        "tools.bench_live",
         [],
         "the Foxglove live view's cost per scan: off, served with no client, watched by one client (target p99 < 5 ms)",
     ),
     (
         "replay",
-        "agent.tools.bench_replay",
+        "tools.bench_replay",
         [],
         "replaying the real Freiburg 079 log: scans/s against the log's own pace, per-scan time on real scans",
     ),
@@ -77,7 +77,7 @@ JSON_FILE = {
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m agent.tools.bench", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m tools.bench", description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=Path("docs/results"), help="where bench.md and the JSON go")
     ap.add_argument("--only", action="append", default=[], help="run only these (repeatable)")
     args = ap.parse_args(argv)
@@ -128,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
     head = [
         "# Benchmarks",
         "",
-        "Made by `make bench` (`python -m agent.tools.bench`), one benchmark per process, one after "
+        "Made by `make bench` (`python -m tools.bench`), one benchmark per process, one after "
         "the other, numba and BLAS limited to one thread.",
         f"Machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}; "
         "each section says when it ran. Speeds are ratios against baselines run in the same "

@@ -12,7 +12,7 @@ detection is any reported object that is not in the frame.
 Time per frame is ``ObjectRecogniser.recognise`` (SIFT on the frame + matching + RANSAC),
 compared with SIFT extraction alone on the same frames (the baseline, same process).
 
-Run: ``python -m agent.tools.bench_objects [--json FILE]``.
+Run: ``python -m tools.bench_objects [--json FILE]``.
 """
 
 from __future__ import annotations
@@ -201,9 +201,7 @@ def report(r: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(
-        prog="python -m agent.tools.bench_objects", description=__doc__.split("\n\n")[0]
-    )
+    ap = argparse.ArgumentParser(prog="python -m tools.bench_objects", description=__doc__.split("\n\n")[0])
     ap.add_argument("--json", type=Path, metavar="FILE", help="also write the results as JSON")
     args = ap.parse_args(argv)
     r = run()

@@ -10,7 +10,7 @@ chain map → odom → base_link → laser, the graph ``/graph``, the areas' tex
 the people ``/people`` — with the place histogram ``/place``, the conversation and a table
 of the channels received beside it. A JSON file lists the same counts.
 
-    python -m agent.tools.live_snapshot ws://127.0.0.1:8765 --seconds 20 --out docs/img/foxglove_live.png
+    python -m tools.live_snapshot ws://127.0.0.1:8765 --seconds 20 --out docs/img/foxglove_live.png
 """
 
 from __future__ import annotations

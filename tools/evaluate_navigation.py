@@ -32,7 +32,7 @@ For each generated office (seeds the bundled place model was not trained on):
      the robot visited, and the share of areas whose nodes all lie in one space.
    * *scan accuracy* (context): per-scan labels against the label of the cell the robot is in.
 
-Run: ``python -m agent.tools.evaluate_navigation --out docs/results --seeds 0,1,2,3,4,5,6,7``
+Run: ``python -m tools.evaluate_navigation --out docs/results --seeds 0,1,2,3,4,5,6,7``
 (about three minutes on 2 cores).
 """
 
@@ -631,9 +631,7 @@ def main(argv: list[str] | None = None) -> int:
                 file=sys.stderr,
             )
     summary = {name: summarize(rows) for name, rows in per_config.items()}
-    command = "python -m agent.tools.evaluate_navigation " + " ".join(
-        argv if argv is not None else sys.argv[1:]
-    )
+    command = "python -m tools.evaluate_navigation " + " ".join(argv if argv is not None else sys.argv[1:])
     meta = {
         "model": str(model_path.relative_to(Path.cwd()))
         if model_path.is_relative_to(Path.cwd())

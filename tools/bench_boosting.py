@@ -7,7 +7,7 @@ book's class-balanced start is our default), both run single-threaded in this pr
 The speed-up is measured in CPU seconds of this process (``time.process_time``), which other
 jobs on a shared machine disturb much less than wall-clock time; both are reported.
 
-    python -m agent.tools.bench_boosting [--n-train 30000] [--features 300] [--rounds 100]
+    python -m tools.bench_boosting [--n-train 30000] [--features 300] [--rounds 100]
 
 scikit-learn is a bench-only dependency (``pip install -e '.[bench]'``); it is imported lazily
 and the baseline is skipped with a message when it is missing. :func:`run` takes any
@@ -199,7 +199,7 @@ def format_result(r: dict[str, Any]) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
-        prog="python -m agent.tools.bench_boosting", description=__doc__.split("\n")[0]
+        prog="python -m tools.bench_boosting", description=__doc__.split("\n")[0]
     )
     parser.add_argument("--n-train", type=int, default=30_000, help="training examples (as many for testing)")
     parser.add_argument("--features", type=int, default=300)

@@ -8,7 +8,7 @@ line itself: at 500 kbaud with 10 bits per byte (8N1) it carries at most
 one core could keep up with. Times are CPU seconds of this process (``time.process_time``),
 which other jobs on a shared machine disturb less than wall-clock time; both are reported.
 
-    python -m agent.tools.bench_sick [--telegrams 2000] [--chunk 1024] [--json]
+    python -m tools.bench_sick [--telegrams 2000] [--chunk 1024] [--json]
 """
 
 from __future__ import annotations
@@ -114,9 +114,7 @@ def run(
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(
-        prog="python -m agent.tools.bench_sick", description=__doc__.split("\n\n")[0]
-    )
+    ap = argparse.ArgumentParser(prog="python -m tools.bench_sick", description=__doc__.split("\n\n")[0])
     ap.add_argument(
         "--telegrams", type=int, default=2000, help="0xB0 telegrams in the buffer (default: 2000)"
     )

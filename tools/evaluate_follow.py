@@ -21,7 +21,7 @@ where the person vanished); the plain tracker with today's follow-me (``chase_fo
 chase to the corner gets 4 s more, the search radius stops at 2.5 m); and today's default
 (the tracker that confirms on evidence and coasts hidden tracks for 2 s).
 
-Run: ``python -m agent.tools.evaluate_follow [--seeds 0-7] [--out docs/results]``.
+Run: ``python -m tools.evaluate_follow [--seeds 0-7] [--out docs/results]``.
 """
 
 from __future__ import annotations
@@ -208,7 +208,7 @@ def main(argv: list[str] | None = None) -> int:
         args.out.mkdir(parents=True, exist_ok=True)
         head = (
             "# Follow-me on the guided tour (simulator)\n\n"
-            f"Made by `python -m agent.tools.evaluate_follow --seeds {args.seeds} --out docs/results`; "
+            f"Made by `python -m tools.evaluate_follow --seeds {args.seeds} --out docs/results`; "
             "the set-up is in the tool's docstring.\n\n"
         )
         atomic_write_text(args.out / "follow_tour.md", head + text + "\n")

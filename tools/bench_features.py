@@ -18,7 +18,7 @@ Single-threaded. Timings are per slice of scans the fastest of ``repeats`` runs,
 the slices: on a shared machine short runs that nobody interrupted are the best estimate of
 the code's own cost. The machine's load average is reported because other processes skew them.
 
-    python -m agent.tools.bench_features [--scans 20000] [--reference 4] [--no-compile]
+    python -m tools.bench_features [--scans 20000] [--reference 4] [--no-compile]
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from agent.datasets import REPO
 from knowledge.fileio import atomic_write_text
 from knowledge.places.features import FeatureExtractor, default_feature_names
 from knowledge.places.features.reference import reference_features
@@ -167,7 +168,7 @@ def compile_seconds() -> dict[str, float]:
     """Import and first-call seconds of a fresh process, with an empty numba cache (cold:
     the kernels are compiled) and again with the cache it filled (warm: they are loaded)."""
     result: dict[str, float] = {}
-    root = Path(__file__).resolve().parents[2]
+    root = REPO
     with tempfile.TemporaryDirectory() as cache:
         env = {**os.environ, "NUMBA_CACHE_DIR": cache}
         for key in ("cold", "warm"):
@@ -280,7 +281,7 @@ def format_result(r: dict[str, Any]) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
-        prog="python -m agent.tools.bench_features", description=__doc__.split("\n")[0]
+        prog="python -m tools.bench_features", description=__doc__.split("\n")[0]
     )
     parser.add_argument("--scans", type=int, default=20_000, help="synthetic 360° scans to featurise")
     parser.add_argument("--subset", type=int, default=150, help="size of the random subset")

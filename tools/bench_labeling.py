@@ -9,7 +9,7 @@ reference parts (the cell-by-cell ray caster and the plain-Python feature defini
 on a sample of cells, extrapolated per cell: it is what the method costs without the
 engineering. numba is limited to one thread for the run.
 
-Run: ``python -m agent.tools.bench_labeling [--model M] [--json FILE]``.
+Run: ``python -m tools.bench_labeling [--model M] [--json FILE]``.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import numpy as np
 
-from agent.commands.places import default_data_dir
+from agent.datasets import data_dir
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.metric.raycast import reference_cast
 from knowledge.places.features.reference import reference_features
@@ -39,7 +39,7 @@ CPP_REFERENCE_SECONDS = 54.0
 
 
 def run(data: Path | None = None, model_path: Path | None = None, *, sample: int = 40) -> dict[str, Any]:
-    data = data or default_data_dir()
+    data = data or data_dir()
     path = data / "ipa" / "labeled" / "lab_intel.map.png"
     if not path.is_file():
         raise SystemExit(f"{path} not found: pass --data or set LOCI_DATA")
@@ -94,9 +94,7 @@ def run(data: Path | None = None, model_path: Path | None = None, *, sample: int
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(
-        prog="python -m agent.tools.bench_labeling", description=__doc__.split("\n\n")[0]
-    )
+    ap = argparse.ArgumentParser(prog="python -m tools.bench_labeling", description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=None)
     ap.add_argument("--model", type=Path, default=None, help="place model (default: the bundled one)")
     ap.add_argument("--sample", type=int, default=40, help="cells for the reference baseline")

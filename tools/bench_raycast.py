@@ -13,7 +13,7 @@ Measures, in one process and on one core:
 
 The casters are warmed up (compiled or loaded) before anything is timed.
 
-    python -m agent.tools.bench_raycast [--data ../shared/data] [--beams 360] [--json out.json]
+    python -m tools.bench_raycast [--data ../shared/data] [--beams 360] [--json out.json]
 
 :func:`run` returns the numbers as a dict; it needs the ipa maps under ``data_dir``
 (``../shared/data`` by default) and raises FileNotFoundError naming the file otherwise.
@@ -36,12 +36,13 @@ from typing import Any
 
 import numpy as np
 
+from agent.datasets import REPO, data_dir
 from knowledge.fileio import atomic_write_text
 from knowledge.metric import OccupancyGrid
 from knowledge.metric.raycast import cast, cast_cells, reference_cast
 
 #: ``$LOCI_DATA``, else ``../shared/data`` beside the clone (as the tests find it).
-DEFAULT_DATA = Path(os.environ.get("LOCI_DATA", Path(__file__).resolve().parents[3] / "shared" / "data"))
+DEFAULT_DATA = data_dir()
 MAP = Path("ipa") / "labeled" / "lab_intel.map.png"
 RESOLUTION = 0.05
 
@@ -87,7 +88,7 @@ def compile_seconds() -> dict[str, float]:
             done = subprocess.run(
                 [sys.executable, "-c", _FIRST_CALLS],
                 env=env,
-                cwd=Path(__file__).resolve().parents[2],
+                cwd=REPO,
                 capture_output=True,
                 text=True,
                 check=True,
@@ -216,9 +217,7 @@ def format_result(r: dict[str, Any]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="python -m agent.tools.bench_raycast", description=__doc__.split("\n")[0]
-    )
+    parser = argparse.ArgumentParser(prog="python -m tools.bench_raycast", description=__doc__.split("\n")[0])
     parser.add_argument(
         "--data", type=Path, default=None, help="the shared data folder (default ../shared/data)"
     )

@@ -10,7 +10,7 @@
 The map grows as the benchmark runs (one room with objects per repetition, plus ``--areas``
 filler areas with objects), so the later repetitions reason over a building-sized map.
 
-    python -m agent.tools.bench_conceptual [--repeat 15] [--areas 30] [--debounce 0.2] [--json [FILE]]
+    python -m tools.bench_conceptual [--repeat 15] [--areas 30] [--debounce 0.2] [--json [FILE]]
 """
 
 from __future__ import annotations
@@ -118,7 +118,7 @@ def run(repeat: int = 15, areas: int = 30, debounce: float = 0.2, queries: int =
 
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
-        prog="python -m agent.tools.bench_conceptual", description=__doc__.split("\n\n")[0]
+        prog="python -m tools.bench_conceptual", description=__doc__.split("\n\n")[0]
     )
     ap.add_argument("--repeat", type=int, default=15, help="inference measurements (default: 15)")
     ap.add_argument("--areas", type=int, default=30, help="filler areas with an object each (default: 30)")

@@ -7,7 +7,7 @@ ignored, balanced accuracy, confusion matrices). The bundled synthetic-trained m
 scored on the same five buildings. Writes ``places_lobo.json``, ``places_lobo.md`` and
 one overlay picture per building into ``--out``.
 
-Run: ``make eval`` (or ``python -m agent.tools.evaluate_places --out docs/results``).
+Run: ``make eval`` (or ``python -m tools.evaluate_places --out docs/results``).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from agent.commands.places import default_data_dir
+from agent.datasets import data_dir
 from agent.progress import Progress
 from knowledge import labels as lbl
 from knowledge.fileio import atomic_write_text, write_image
@@ -101,9 +101,7 @@ def _half_split(lmap: LabelledMap) -> tuple[LabelledMap, np.ndarray]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(
-        prog="python -m agent.tools.evaluate_places", description=__doc__.split("\n\n")[0]
-    )
+    ap = argparse.ArgumentParser(prog="python -m tools.evaluate_places", description=__doc__.split("\n\n")[0])
     ap.add_argument(
         "--data", type=Path, default=None, help="data folder (default $LOCI_DATA or ../shared/data)"
     )
@@ -116,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="skip the variants (uniform weights, half splits)")
     ap.add_argument("--quiet", action="store_true")
     args = ap.parse_args(argv)
-    data = args.data or default_data_dir()
+    data = args.data or data_dir()
     if not (data / "ipa" / "labeled").is_dir():
         print(f"no labelled maps under {data}/ipa/labeled: pass --data or set LOCI_DATA", file=sys.stderr)
         return 2
@@ -162,7 +160,7 @@ def main(argv: list[str] | None = None) -> int:
             model_h, _ = train_place_model([left], config, progress=progress)
             result_h = label_map(maps[b].grid, model_h, cells=right, progress=progress)
             halves.append(_row(b, score_labels(maps[b], result_h), result_h.timings["total"]))
-    cmd = "python -m agent.tools.evaluate_places " + " ".join(argv if argv is not None else sys.argv[1:])
+    cmd = "python -m tools.evaluate_places " + " ".join(argv if argv is not None else sys.argv[1:])
     doc = {
         "command": cmd.strip(),
         "config": config.as_json(),

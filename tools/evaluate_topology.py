@@ -26,7 +26,7 @@ Models are cached in ``--models`` (retrained when the cached one was made with o
 Histograms can be cached too (``--cache-histograms``) to try the post-processing again without
 relabeling; the timings then come from the run that labelled.
 
-Run: ``python -m agent.tools.evaluate_topology --out docs/results`` (about an hour on 2 cores).
+Run: ``python -m tools.evaluate_topology --out docs/results`` (about an hour on 2 cores).
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from agent.commands.places import default_data_dir
+from agent.datasets import data_dir
 from agent.progress import Progress
 from knowledge.fileio import atomic_write_bytes, atomic_write_text, write_image
 from knowledge.labels import DOORWAY
@@ -501,7 +501,7 @@ def ablation_markdown(rows: list[dict[str, Any]]) -> list[str]:
 # ---------------------------------------------------------------------- main
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
-        prog="python -m agent.tools.evaluate_topology", description=(__doc__ or "").split("\n\n")[0]
+        prog="python -m tools.evaluate_topology", description=(__doc__ or "").split("\n\n")[0]
     )
     ap.add_argument(
         "--data", type=Path, default=None, help="data folder (default $LOCI_DATA or ../shared/data)"
@@ -534,7 +534,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rounds", type=int, default=100, help="boosting rounds T (default 100)")
     ap.add_argument("--quiet", action="store_true")
     args = ap.parse_args(argv)
-    data = args.data or default_data_dir()
+    data = args.data or data_dir()
     if not (data / "ipa" / "labeled").is_dir():
         print(f"no labelled maps under {data}/ipa/labeled: pass --data or set LOCI_DATA", file=sys.stderr)
         return 2
@@ -543,7 +543,7 @@ def main(argv: list[str] | None = None) -> int:
     hist_dir = args.models / "histograms" if args.cache_histograms else None
     if hist_dir is not None:
         hist_dir.mkdir(parents=True, exist_ok=True)
-    cmd = "python -m agent.tools.evaluate_topology " + " ".join(argv if argv is not None else sys.argv[1:])
+    cmd = "python -m tools.evaluate_topology " + " ".join(argv if argv is not None else sys.argv[1:])
     config = TrainingConfig(stride=args.stride, rounds=args.rounds, classes=CLASSES3)
     maps = {b: load_ipa_building(data, b) for b in IPA_BUILDINGS}
     t_start = time.perf_counter()

@@ -1,0 +1,1 @@
+"""Developer tools: benchmarks and evaluations run with ``python -m tools.<name>`` (make bench, make eval)."""

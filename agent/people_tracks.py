@@ -157,7 +157,7 @@ def track_recording(
     """
     import time
 
-    from agent.bus.codecs import LASER_SCAN_CODEC, POSE_CODEC
+    from agent.bus.codecs import LASER_SCAN_CODEC, POSE_CODEC, checked_decode
     from agent.bus.keys import RobotKeys
     from agent.core.odom_sync import DROP_REASONS, OdomSync, SyncParams
     from agent.core.pipeline import PipelineParams, compose
@@ -169,7 +169,6 @@ def track_recording(
         recorded_sync_params,
     )
     from agent.recording.replay import McapMessages
-    from agent.runtime import checked_decode
     from knowledge.errors import ProtocolError
 
     p = as_loci_recording(Path(path))

@@ -54,7 +54,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import hashlib
 import json
 import logging
 import math
@@ -80,9 +79,9 @@ from agent.bus.codecs import (
     LASER_SCAN_CODEC,
     POSE_CODEC,
     Codec,
+    checked_decode,
     decode_laser_scan,
     frame_transform,
-    split_encoding,
 )
 from agent.bus.diagnostics import diagnostics_message, publish_diagnostics
 from agent.bus.keys import Policy, RobotKeys, robot_wildcard
@@ -101,7 +100,7 @@ from agent.supervisor import Restarts, supervise
 from drivers.camera.jpeg import decode_image
 from drivers.messages import LaserScan, Pose2D
 from knowledge.errors import ConfigError, DataError, ProtocolError
-from knowledge.fileio import atomic_write_text
+from knowledge.fileio import atomic_write_text, file_sha256
 from knowledge.people.detector import LegDetector
 from knowledge.places.model import PlaceModel
 from knowledge.topology import persistence
@@ -118,15 +117,6 @@ TICK = 0.05
 RECORD_GRACE = 0.3
 
 
-def checked_decode(codec: Codec[T], encoding: str, payload: bytes, where: str) -> T:
-    """Decode a sample as a subscriber does: a sample whose encoding names another schema
-    is invalid (:class:`ProtocolError`); one without a schema is decoded anyway."""
-    _, schema = split_encoding(encoding)
-    if schema and schema != codec.schema:
-        raise ProtocolError(f"{where}: expected {codec.schema}, the sample says {schema}")
-    return codec.decode(payload)
-
-
 def _timed(codec: Codec[T]) -> Callable[[RawSample], tuple[float, T]]:
     """A subscription decoder keeping the arrival time (seconds since the epoch)."""
 
@@ -134,14 +124,6 @@ def _timed(codec: Codec[T]) -> Callable[[RawSample], tuple[float, T]]:
         return raw.recv_ns * 1e-9, checked_decode(codec, raw.encoding, raw.payload, raw.key)
 
     return decode
-
-
-def file_sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with path.open("rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def full_scan_message(result: StepResult, max_range: float) -> LaserScan:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import os
 import tempfile
 from pathlib import Path
@@ -54,3 +55,12 @@ def encode_image(path: str | Path, image: np.ndarray) -> bytes:
 def write_image(path: str | Path, image: np.ndarray) -> Path:
     """Write an image atomically (format from the suffix)."""
     return atomic_write_bytes(path, encode_image(path, image))
+
+
+def file_sha256(path: Path) -> str:
+    """The SHA-256 of a file's bytes, read in 1 MiB blocks (hex digits)."""
+    h = hashlib.sha256()
+    with path.open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()

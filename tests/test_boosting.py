@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from knowledge.errors import NotFittedError
-from knowledge.places.boosting import DiscreteAdaBoost, GeneralizedAdaBoost, booster_from_state
-from knowledge.places.weak import KIND_INTERVAL, KIND_THRESHOLD, SortedFeatures
+from knowledge.learning.boosting import DiscreteAdaBoost, GeneralizedAdaBoost, booster_from_state
+from knowledge.learning.weak import KIND_INTERVAL, KIND_THRESHOLD, SortedFeatures
 
 # -- brute force references -------------------------------------------------------------
 

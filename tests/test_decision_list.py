@@ -11,8 +11,8 @@ import pytest
 
 from knowledge.errors import NotFittedError
 from knowledge.labels import CLASS_NAMES
-from knowledge.places.boosting import GeneralizedAdaBoost
-from knowledge.places.decision_list import DecisionList, class_names, histogram, order_name
+from knowledge.learning.boosting import GeneralizedAdaBoost
+from knowledge.learning.decision_list import DecisionList, class_names, histogram, order_name
 
 NAMES = ["room", "corridor", "doorway", "hallway"]
 

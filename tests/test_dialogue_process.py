@@ -26,8 +26,8 @@ from agent.bus.session import BusConfig, close_session, listening_endpoints, ope
 from agent.bus.testing import session_pair, settle
 from agent.commands import dialogue as dialogue_command
 from agent.dialogue.process import Dialogue, render_reply
-from agent.dialogue.referring import describe_area
 from agent.dialogue.transcript import Transcript, read_transcript
+from knowledge.conceptual.referring import describe_area
 
 ROBOT = "rosie"
 LIVING = {

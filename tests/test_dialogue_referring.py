@@ -6,14 +6,14 @@ from typing import Any
 
 import pytest
 
-from agent.dialogue.referring import (
+from knowledge.conceptual.lexicon import kind_words
+from knowledge.conceptual.referring import (
     answer_text,
     describe_area,
     describe_target,
     indefinite,
     join_words,
 )
-from knowledge.conceptual.lexicon import kind_words
 
 TV = {"name": "tv-1", "kind": "Television"}
 COUCH = {"name": "couch", "kind": "Couch"}

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from knowledge.places.metrics import format_confusion, score
+from knowledge.learning.metrics import format_confusion, score
 
 
 def test_scores_by_hand() -> None:

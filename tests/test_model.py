@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from knowledge.errors import ModelError
-from knowledge.places.boosting import GeneralizedAdaBoost
-from knowledge.places.decision_list import DecisionList
+from knowledge.learning.boosting import GeneralizedAdaBoost
+from knowledge.learning.decision_list import DecisionList
 from knowledge.places.model import FORMAT, DataSummary, PlaceModel, ScanParams
 
 features = pytest.importorskip(

@@ -9,6 +9,7 @@ import pytest
 
 from knowledge import labels as lbl
 from knowledge.errors import MapError
+from knowledge.learning.metrics import score
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.places.dataset import (
     LabelledMap,
@@ -19,7 +20,6 @@ from knowledge.places.dataset import (
     simulate_scans,
 )
 from knowledge.places.labeling import class_codes, label_map
-from knowledge.places.metrics import score
 from knowledge.places.model import PlaceModel
 from knowledge.places.training import TrainingConfig, merge_classes, train_place_model
 from sim.buildings import generate_building

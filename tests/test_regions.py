@@ -13,7 +13,7 @@ from knowledge.errors import ProtocolError
 from knowledge.fileio import write_image
 from knowledge.labels import CORRIDOR, DOORWAY, IPA_CODES, ROOM, read_label_image
 from knowledge.metric.grid import OccupancyGrid
-from knowledge.topology.regions import (
+from knowledge.places.regions import (
     CorrectionThresholds,
     correct_regions,
     extract_regions,

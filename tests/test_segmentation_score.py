@@ -10,7 +10,7 @@ import pytest
 
 from knowledge.labels import CORRIDOR, DOORWAY, ROOM
 from knowledge.metric.grid import OccupancyGrid
-from knowledge.topology.regions import extract_regions
+from knowledge.places.regions import extract_regions
 from knowledge.topology.segmentation_score import gt_rooms, score, segment_ids, segments_from_graph
 
 

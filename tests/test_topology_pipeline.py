@@ -15,8 +15,10 @@ from knowledge.places.dataset import LabelledMap
 from knowledge.places.features import default_feature_names
 from knowledge.places.labeling import MapLabels, class_codes
 from knowledge.places.model import PlaceModel
+from knowledge.places.regions import CorrectionThresholds, extract_regions, thresholds_from_training
 from knowledge.places.relaxation import CompatibilityStats
-from knowledge.places.topology_pipeline import (
+from knowledge.places.training import HALLWAY_AS_CORRIDOR, TrainingConfig, train_place_model
+from knowledge.topology.pipeline import (
     TopologyConfig,
     TopologyResult,
     build_topology,
@@ -26,8 +28,6 @@ from knowledge.places.topology_pipeline import (
     segments_from_regions,
     topology_from_histograms,
 )
-from knowledge.places.training import HALLWAY_AS_CORRIDOR, TrainingConfig, train_place_model
-from knowledge.topology.regions import CorrectionThresholds, extract_regions, thresholds_from_training
 from knowledge.topology.topomap import dumps, loads
 from sim.buildings import generate_building
 

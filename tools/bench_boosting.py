@@ -32,8 +32,8 @@ import numpy as np
 import numpy.typing as npt
 
 from knowledge.fileio import atomic_write_text
-from knowledge.places.boosting import GeneralizedAdaBoost
-from knowledge.places.weak import SortedFeatures
+from knowledge.learning.boosting import GeneralizedAdaBoost
+from knowledge.learning.weak import SortedFeatures
 
 
 def make_data(

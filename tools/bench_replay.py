@@ -40,12 +40,11 @@ def per_scan(path: Path, model: Any, people: bool, limit: int | None) -> np.ndar
     """Milliseconds of each ``Pipeline.process`` over the recording's matched scans."""
     from dataclasses import replace
 
-    from agent.bus.codecs import LASER_SCAN_CODEC, POSE_CODEC
+    from agent.bus.codecs import LASER_SCAN_CODEC, POSE_CODEC, checked_decode
     from agent.core.odom_sync import OdomSync, SyncParams
     from agent.core.pipeline import PeopleParams, Pipeline, PipelineParams
     from agent.recording.offline import read_recording_metadata
     from agent.recording.replay import McapMessages
-    from agent.runtime import checked_decode
 
     meta = read_recording_metadata(path)
     params = PipelineParams.from_table(json.loads(meta["pipeline"]))

@@ -40,14 +40,14 @@ from knowledge.labels import CORRIDOR, DOORWAY, ROOM
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.places.labeling import label_map
 from knowledge.places.model import PlaceModel, default_model_path
+from knowledge.places.regions import CorrectionThresholds, correct_regions, extract_regions
 from knowledge.places.relaxation import CompatibilityStats, argmax_labels, relax
-from knowledge.places.topology_pipeline import (
+from knowledge.topology.pipeline import (
     histogram_image,
     model_relaxation_stats,
     model_thresholds,
     segments_from_regions,
 )
-from knowledge.topology.regions import CorrectionThresholds, correct_regions, extract_regions
 from knowledge.topology.segmentation_score import score
 from knowledge.topology.topomap import draw_graph, draw_regions, dumps, map_background, topomap_document
 

@@ -25,9 +25,9 @@ from agent.datasets import data_dir
 from agent.progress import Progress
 from knowledge import labels as lbl
 from knowledge.fileio import atomic_write_text, write_image
+from knowledge.learning.metrics import Scores, score
 from knowledge.places.dataset import IPA_BUILDINGS, LabelledMap, load_ipa_building
 from knowledge.places.labeling import MapLabels, label_map
-from knowledge.places.metrics import Scores, score
 from knowledge.places.model import PlaceModel, default_model_path
 from knowledge.places.training import HALLWAY_AS_CORRIDOR, TrainingConfig, train_place_model
 

@@ -50,7 +50,9 @@ from knowledge.metric.grid import OccupancyGrid
 from knowledge.places.dataset import IPA_BUILDINGS, LabelledMap, load_ipa_building
 from knowledge.places.labeling import MapLabels, class_codes, label_map
 from knowledge.places.model import PlaceModel, default_model_path
-from knowledge.places.topology_pipeline import (
+from knowledge.places.regions import correct_regions
+from knowledge.places.training import TrainingConfig, train_place_model
+from knowledge.topology.pipeline import (
     TopologyConfig,
     TopologyResult,
     histogram_image,
@@ -58,8 +60,6 @@ from knowledge.places.topology_pipeline import (
     model_thresholds,
     topology_from_histograms,
 )
-from knowledge.places.training import TrainingConfig, train_place_model
-from knowledge.topology.regions import correct_regions
 from knowledge.topology.segmentation_score import gt_rooms, score
 from knowledge.topology.topomap import draw_graph, draw_labels, draw_regions, map_background, overview
 
@@ -388,7 +388,7 @@ def run_segmentation(
 
 
 def _segmentation_picture(path: Path, grid: OccupancyGrid, gt: np.ndarray, r: TopologyResult) -> None:
-    from knowledge.topology.regions import RegionGraph
+    from knowledge.places.regions import RegionGraph
     from knowledge.topology.topomap import region_colours
 
     bg = map_background(grid)

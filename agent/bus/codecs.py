@@ -366,6 +366,15 @@ def split_encoding(encoding: str) -> tuple[str, str]:
     return mime.strip(), schema.strip()
 
 
+def checked_decode(codec: Codec[T], encoding: str, payload: bytes, where: str) -> T:
+    """Decode a sample as a subscriber does: a sample whose encoding names another schema
+    is invalid (:class:`ProtocolError`); one without a schema is decoded anyway."""
+    _, schema = split_encoding(encoding)
+    if schema and schema != codec.schema:
+        raise ProtocolError(f"{where}: expected {codec.schema}, the sample says {schema}")
+    return codec.decode(payload)
+
+
 @cache
 def _foxglove_mcap_schema(name: str) -> McapSchema:
     s = _FOXGLOVE_TYPES[name].get_schema()

@@ -148,7 +148,7 @@ def load_truth(labels: Path, label_map: Path | None, align: Path | None, poses: 
 
 def format_report(name: str, s: LogScores) -> str:
     """The scores as a few readable lines."""
-    from knowledge.places.metrics import format_confusion
+    from knowledge.learning.metrics import format_confusion
 
     def pct(v: float | None) -> str:
         return "n/a" if v is None or v != v else f"{100 * v:.1f} %"

@@ -336,9 +336,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     import numpy as np
 
     from agent.progress import Progress
+    from knowledge.learning.decision_list import order_name
+    from knowledge.learning.metrics import format_confusion, score
     from knowledge.places.dataset import simulate_scans
-    from knowledge.places.decision_list import order_name
-    from knowledge.places.metrics import format_confusion, score
     from knowledge.places.training import merge_classes
 
     model = _load_model(args.model)
@@ -498,8 +498,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from knowledge import labels as lbl
     from knowledge.fileio import atomic_write_text, write_image
     from knowledge.label_maps import label_map_yaml, legend_entries, with_legend
+    from knowledge.learning.metrics import format_confusion, score
     from knowledge.places.labeling import label_map
-    from knowledge.places.metrics import format_confusion, score
     from knowledge.places.model import PlaceModel, default_model_path
     from sim.buildings import generate_tour_office
 

@@ -1,6 +1,6 @@
 """``loci places topology`` and ``loci places segment-score``: topological maps from occupancy maps.
 
-``topology`` runs the whole chain of :mod:`knowledge.places.topology_pipeline` on one map and
+``topology`` runs the whole chain of :mod:`knowledge.topology.pipeline` on one map and
 writes every intermediate result; ``segment-score`` scores a room segmentation against a
 hand-made ground truth so anyone can check a result. Both are registered under ``loci places``
 by :mod:`agent.commands.places`.
@@ -160,7 +160,7 @@ def load_map(path: Path, resolution: float | None, free_grey: int | None) -> Any
 
 def _thresholds(args: argparse.Namespace, model: Any) -> Any:
     """Correction thresholds from the options, completing them from the model (or the book)."""
-    from knowledge.places.topology_pipeline import model_thresholds
+    from knowledge.topology.pipeline import model_thresholds
 
     if args.place_min_area is None and args.doorway_min_area is None:
         return None
@@ -184,7 +184,7 @@ def cmd_topology(args: argparse.Namespace) -> int:
     from knowledge.fileio import atomic_write_text, write_image
     from knowledge.label_maps import label_map_yaml, legend_entries, with_legend, yaml_path
     from knowledge.places.model import PlaceModel, default_model_path
-    from knowledge.places.topology_pipeline import TopologyConfig, build_topology
+    from knowledge.topology.pipeline import TopologyConfig, build_topology
     from knowledge.topology.topomap import (
         draw_graph,
         draw_labels,

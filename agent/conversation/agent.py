@@ -56,10 +56,10 @@ from typing import Any, Protocol, TypeVar
 
 from agent.bus.schemas import MAX_JSON_DEPTH, SMALL_MESSAGE_BYTES, json_depth
 from agent.conversation.memory import AREA_CLASSES, MemoryConcepts, class_of_words
-from agent.dialogue.referring import answer_text, describe_target
-from agent.dialogue.referring import with_article as _with_article
 from agent.ratelog import RateLimitedLog
 from knowledge.conceptual.lexicon import kind_words
+from knowledge.conceptual.referring import answer_text, describe_target
+from knowledge.conceptual.referring import with_article as _with_article
 from knowledge.errors import LociError
 from knowledge.navigation.graph import PLACE, NavigationGraph
 from knowledge.navigation.planning import goal_in_area, plan, start_node

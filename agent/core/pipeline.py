@@ -49,11 +49,10 @@ import math
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from agent.config import AgentConfig
 from agent.tables import build_dataclass, dataclass_table
 from drivers.messages import LaserScan, Pose2D
 from knowledge.metric.local_map import LocalMap, LocalMapParams, beam_endpoints
@@ -67,6 +66,9 @@ from knowledge.people.static import StaticCells
 from knowledge.places.model import PlaceModel
 from knowledge.topology import persistence
 from knowledge.topology.areas import AreaEvent, AreaMap
+
+if TYPE_CHECKING:  # the configuration file's types; the core itself opens no session
+    from agent.config import AgentConfig
 
 __all__ = [
     "DOORWAY_INPUTS",

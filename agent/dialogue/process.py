@@ -8,7 +8,7 @@
   ``dialogue/intent``;
 - every intent waits for its reply: the first ``loci.say/1`` (or ``loci.ask/1``) whose
   ``in_reply_to`` is its id. The reply is rendered from its ``content`` with
-  :mod:`agent.dialogue.referring` (the agent's ``text`` when there is no content or the
+  :mod:`knowledge.conceptual.referring` (the agent's ``text`` when there is no content or the
   status is ``error``), printed and spoken. No reply within ``reply_timeout`` seconds is
   reported (printed, logged, in the transcript); a reply arriving later is still spoken;
 - later reports on a task (``task`` = an intent id, e.g. "I have reached the kitchen.") and
@@ -44,9 +44,9 @@ from agent.bus.bridge import BusStats, Publisher, Subscription, publish_stream, 
 from agent.bus.keys import robot_name, stream_key
 from agent.bus.session import BusConfig
 from agent.dialogue.grammar import NotUnderstood, parse
-from agent.dialogue.referring import answer_text
 from agent.dialogue.speech import Speech
 from agent.dialogue.transcript import DIALOGUE, ROBOT, Transcript
+from knowledge.conceptual.referring import answer_text
 from knowledge.errors import ProtocolError
 
 log = logging.getLogger(__name__)

@@ -233,14 +233,14 @@ def replay_recording(
     Raises:
         DataError: the file is missing or not MCAP, or has no scans of the robot.
     """
-    from agent.bus.codecs import LASER_SCAN_CODEC, POSE_CODEC
+    from agent.bus.codecs import LASER_SCAN_CODEC, POSE_CODEC, checked_decode
     from agent.bus.keys import RobotKeys
     from agent.core.odom_sync import OdomSync, SyncParams
     from agent.core.pipeline import Pipeline, PipelineParams
     from agent.recording.importer import as_loci_recording
     from agent.recording.replay import Replay
-    from agent.runtime import checked_decode, file_sha256
     from knowledge.errors import DataError, ProtocolError
+    from knowledge.fileio import file_sha256
     from knowledge.places.model import PlaceModel, default_model_path
 
     p = as_loci_recording(Path(path))  # a ROS 2 bag (MCAP storage) is imported first

@@ -54,7 +54,7 @@ import numpy as np
 from scipy import ndimage
 
 from knowledge.labels import CLASS_NAMES, CORRIDOR, DOORWAY, HALLWAY, IPA_CODES, ROOM
-from knowledge.places.metrics import Scores, score
+from knowledge.learning.metrics import Scores, score
 
 __all__ = [
     "Alignment",

@@ -5,7 +5,7 @@ as *person* (a leg, or both legs seen as one segment) or *non-person*, from the 
 was trained on (by default the shape features C.1–C.3 and C.6–C.13: not C.14, which needs
 consecutive scans, nor the jump distances C.4/C.5, see :data:`~knowledge.people.features.DEFAULT_COLUMNS`), with
 ``T = 100`` threshold weak learners (eq. 8.1) boosted by the generalized AdaBoost of Sect. 4.2
-(:class:`~knowledge.places.boosting.GeneralizedAdaBoost`). A segment is a person when
+(:class:`~knowledge.learning.boosting.GeneralizedAdaBoost`). A segment is a person when
 ``F(x) ≥ threshold`` (0 by default, the sign of the strong classifier); every beam of a person
 segment is labelled person, all other beams non-person. A detector may have a ``max_range``:
 segments whose centroid is farther from the sensor are never persons (the bundled model's
@@ -34,6 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from knowledge.errors import ModelError, NotFittedError
+from knowledge.learning.boosting import STATE_ARRAYS, GeneralizedAdaBoost, booster_from_state
 from knowledge.npzfile import read_npz, write_npz
 from knowledge.people.features import (
     DEFAULT_COLUMNS,
@@ -44,7 +45,6 @@ from knowledge.people.features import (
     feature_label,
 )
 from knowledge.people.segmentation import DEFAULT_JUMP, FloatArray, Segmentation, segment_scan
-from knowledge.places.boosting import STATE_ARRAYS, GeneralizedAdaBoost, booster_from_state
 
 FORMAT = "loci.people-model/2"
 FORMAT_FAMILY = "loci.people-model/"

@@ -34,10 +34,10 @@ import numpy as np
 import numpy.typing as npt
 
 from knowledge.errors import ModelError
+from knowledge.learning.boosting import STATE_ARRAYS
+from knowledge.learning.decision_list import DecisionList
+from knowledge.learning.weak import FloatArray
 from knowledge.npzfile import read_npz, write_npz
-from knowledge.places.boosting import STATE_ARRAYS
-from knowledge.places.decision_list import DecisionList
-from knowledge.places.weak import FloatArray
 
 FORMAT = "loci.place-model/1"
 FORMAT_FAMILY = "loci.place-model/"

@@ -18,13 +18,13 @@ from typing import Any
 import numpy as np
 
 from knowledge import labels as lbl
-from knowledge.places.boosting import DiscreteAdaBoost, GeneralizedAdaBoost
+from knowledge.learning.boosting import DiscreteAdaBoost, GeneralizedAdaBoost
+from knowledge.learning.decision_list import DecisionList
 from knowledge.places.dataset import LabelledMap, ScanSet, simulate_scans
-from knowledge.places.decision_list import DecisionList
 from knowledge.places.features import FeatureExtractor, default_feature_names
 from knowledge.places.model import DataSummary, PlaceModel, ScanParams
+from knowledge.places.regions import CorrectionThresholds, thresholds_from_training
 from knowledge.places.relaxation import CompatibilityStats
-from knowledge.topology.regions import CorrectionThresholds, thresholds_from_training
 
 ProgressFn = Callable[[str, int, int], None]
 

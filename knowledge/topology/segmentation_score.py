@@ -33,7 +33,7 @@ import numpy as np
 from scipy import ndimage
 
 from knowledge.labels import CORRIDOR, HALLWAY, ROOM
-from knowledge.topology.regions import RegionGraph
+from knowledge.places.regions import RegionGraph
 
 
 def gt_rooms(gt_image: np.ndarray, *, free_threshold: int = 250, min_room_px: int = 100) -> np.ndarray:

@@ -40,8 +40,8 @@ import numpy as np
 from knowledge.errors import ProtocolError
 from knowledge.labels import CLASS_COLORS_BGR, CLASS_NAMES, overlay
 from knowledge.metric.grid import OccupancyGrid
+from knowledge.places.regions import CorrectionThresholds, Merge, RegionGraph
 from knowledge.schema import MessageSchema, Spec, array, integer, mapping, number, obj, string
-from knowledge.topology.regions import CorrectionThresholds, Merge, RegionGraph
 
 SCHEMA = "loci.topomap/1"
 

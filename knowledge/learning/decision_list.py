@@ -37,8 +37,8 @@ import numpy as np
 import numpy.typing as npt
 
 from knowledge.errors import NotFittedError
-from knowledge.places.boosting import AdaBoost, GeneralizedAdaBoost, booster_from_state
-from knowledge.places.weak import FloatArray, SortedFeatures, as_feature_matrix
+from knowledge.learning.boosting import AdaBoost, GeneralizedAdaBoost, booster_from_state
+from knowledge.learning.weak import FloatArray, SortedFeatures, as_feature_matrix
 
 #: "best" enumerates K! orders; beyond this many classes use "heuristic" or an explicit order.
 MAX_BEST_CLASSES = 7

@@ -38,14 +38,14 @@ from knowledge.errors import ModelError
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.places.labeling import MapLabels, label_map
 from knowledge.places.model import PlaceModel
-from knowledge.places.relaxation import Border, CompatibilityStats, argmax_labels, relax
-from knowledge.topology.regions import (
+from knowledge.places.regions import (
     CorrectionThresholds,
     Merge,
     RegionGraph,
     correct_regions,
     extract_regions,
 )
+from knowledge.places.relaxation import Border, CompatibilityStats, argmax_labels, relax
 from knowledge.topology.topomap import topomap_document
 
 ProgressFn = Callable[[str, int, int], None]

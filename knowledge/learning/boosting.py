@@ -11,7 +11,7 @@ Training (both figures):
   (``balanced=True``; with ``balanced=False`` ``D_1`` is uniform, as in Fig. 2.2);
 * each round the weights are normalised, the weak learner with the lowest weighted error
   ``ε`` — equivalently the highest ``r = Σ D y h``, ``ε = (1 − r)/2`` — is found exactly over
-  all features (:class:`~knowledge.places.weak.SortedFeatures`), and the weights updated;
+  all features (:class:`~knowledge.learning.weak.SortedFeatures`), and the weights updated;
 * discrete: ``β = ε/(1 − ε)``, ``α = log(1/β)``, ``D ← D·β^{1−|h−y|}``;
   generalized: ``α = ½ log((1 + r)/(1 − r))`` (eq. 2.4), ``D ← D·exp(−α y h)``.
 
@@ -41,7 +41,7 @@ import numpy as np
 import numpy.typing as npt
 
 from knowledge.errors import NotFittedError
-from knowledge.places.weak import (
+from knowledge.learning.weak import (
     KIND_INTERVAL,
     KIND_NAMES,
     KIND_THRESHOLD,
@@ -82,7 +82,7 @@ def binary_labels(y: npt.ArrayLike, n: int) -> npt.NDArray[np.bool_]:
         if not (values <= {0, 1} or values <= {-1, 1}):
             raise ValueError(
                 f"y must be binary: bool, 0/1 or -1/+1; got the values {sorted(values)[:10]}. "
-                "For several classes use knowledge.places.decision_list.DecisionList"
+                "For several classes use knowledge.learning.decision_list.DecisionList"
             )
         pos = a == 1
     else:

@@ -39,6 +39,7 @@ INSTALLED = {
     "/etc/loci/zenoh/router.json5": ZENOH / "router.json5",
     "/etc/loci/zenoh/agent.json5": ZENOH / "agent.json5",
     "/etc/loci/zenoh/dialogue.json5": ZENOH / "dialogue.json5",
+    "/etc/loci/zenoh/tools.json5": ZENOH / "tools.json5",
     "/etc/loci/zenoh/credentials.txt": ZENOH / "credentials.txt.example",
 }
 VENV_LOCI = "/opt/loci/venv/bin/loci"
@@ -151,7 +152,7 @@ def test_zenoh_files_parse_and_agree() -> None:
     users = credentials()
     in_subjects = [u for s in acl["subjects"] for u in s["usernames"]]
     assert sorted(in_subjects) == sorted(users), "each user must be in exactly one subject"
-    for name, user in (("agent.json5", "agent"), ("dialogue.json5", "dialogue")):
+    for name, user in (("agent.json5", "agent"), ("dialogue.json5", "dialogue"), ("tools.json5", "tools")):
         client = zenoh_json(ZENOH / name)
         assert client["mode"] == "client"
         assert client["connect"]["endpoints"] == router["listen"]["endpoints"]
@@ -374,6 +375,36 @@ def test_the_dialogue_service_connects_as_the_dialogue_user(router: str) -> None
     finally:
         for s in reversed(sessions):
             close_session(s)
+
+
+def test_loci_record_logs_in_as_tools_and_records_through_the_router(router: str, tmp_path: Path) -> None:
+    """The documented recording on a robot: ``loci record --mode client --zenoh-config tools.json5``."""
+    from agent.recording.replay import McapMessages
+
+    out = tmp_path / "run.mcap"
+    agent = _user(router, "agent")
+    stop = threading.Event()
+
+    def publish() -> None:
+        while not stop.is_set():
+            agent.put("loci/r/diagnostics", b'{"from": "the agent"}')
+            time.sleep(0.05)
+
+    pub = threading.Thread(target=publish, daemon=True)
+    pub.start()
+    try:
+        proc = subprocess.run(
+            [sys.executable, "-m", "agent.cli", "record", str(out), "--robot", "r", "--mode", "client",
+             "--connect", router, "--zenoh-config", str(ZENOH / "tools.json5"), "--duration", "3"],
+            capture_output=True, text=True, timeout=60, cwd=REPO,
+        )  # fmt: skip
+    finally:
+        stop.set()
+        pub.join()
+        close_session(agent)
+    assert proc.returncode == 0, proc.stderr
+    keys = {m.topic for m in McapMessages(out)}
+    assert "loci/r/diagnostics" in keys
 
 
 def _openssl(*args: str, cwd: Path) -> None:

@@ -103,6 +103,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
         bus = BusConfig(
             listen=tuple(args.listen or ("tcp/127.0.0.1:0",)),
             connect=tuple(args.connect or (DEFAULT_AGENT_ENDPOINT,)),
+            config_file=args.zenoh_config,
         )
     return DialogueConfig(
         robot=robot,
@@ -136,13 +137,13 @@ def _from_robot_config(args: argparse.Namespace) -> tuple[Any, str | None]:
             mode="client",
             listen=(),
             connect=tuple(args.connect or agent_bus.connect),
-            config_file=agent_bus.config_file,
+            config_file=getattr(args, "zenoh_config", None) or agent_bus.config_file,
         )
     else:
         bus = BusConfig(
             listen=tuple(args.listen or ("tcp/127.0.0.1:0",)),
             connect=tuple(args.connect or (*agent_bus.connect, *agent_bus.listen)),
-            config_file=agent_bus.config_file,
+            config_file=getattr(args, "zenoh_config", None) or agent_bus.config_file,
         )
     return bus, args.robot or config.robot.name or None
 

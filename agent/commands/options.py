@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from collections.abc import Callable
 from typing import Any
@@ -89,6 +90,16 @@ def add_bus_options(parser: argparse.ArgumentParser, *, mode: bool = False) -> N
         parser.add_argument(
             "--mode", choices=("peer", "client"), default="peer", help="peer (default) or client of a router"
         )
+    parser.add_argument(
+        "--zenoh-config",
+        metavar="FILE.json5",
+        default=os.environ.get("LOCI_BUS_CONFIG_FILE"),
+        help=(
+            "a Zenoh JSON5 configuration to start from: the user and password the router expects, "
+            "TLS (e.g. /etc/loci/zenoh/tools.json5; default: $LOCI_BUS_CONFIG_FILE); the options "
+            "above are set over it"
+        ),
+    )
 
 
 def emit_json(obj: dict[str, Any]) -> None:

@@ -32,7 +32,12 @@ def register(subparsers: Any) -> None:
             "readable file (loci replay reads it up to the last complete chunk). When nothing was "
             "published on the robot's keys, no file is left and the exit status is 1."
         ),
-        epilog=f"Example: loci record run1.mcap --robot rosie --connect {DEFAULT_AGENT_ENDPOINT} --duration 60",
+        epilog=(
+            f"Example: loci record run1.mcap --robot rosie --connect {DEFAULT_AGENT_ENDPOINT} --duration 60\n"
+            "On a robot with the router (docs/deploy.md): loci record run1.mcap --robot rosie "
+            "--mode client --zenoh-config /etc/loci/zenoh/tools.json5"
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("output", metavar="OUT.mcap", help="the recording to write (a file)")
     add_bus_options(p, mode=True)
@@ -60,7 +65,10 @@ def _record(args: argparse.Namespace) -> int:
     else:
         listen = tuple(args.listen or ("tcp/127.0.0.1:0",))
     config = BusConfig(
-        mode=args.mode, listen=listen, connect=tuple(args.connect or (DEFAULT_AGENT_ENDPOINT,))
+        mode=args.mode,
+        listen=listen,
+        connect=tuple(args.connect or (DEFAULT_AGENT_ENDPOINT,)),
+        config_file=args.zenoh_config,
     )
     return asyncio.run(_run(args, robot, config))
 

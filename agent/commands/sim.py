@@ -295,7 +295,12 @@ def _robot(args: argparse.Namespace) -> int:
 
     name = robot_name(args.robot)
     listen = tuple(args.listen or ()) if args.mode == "client" else tuple(args.listen or ("tcp/127.0.0.1:0",))
-    bus = BusConfig(mode=args.mode, listen=listen, connect=tuple(args.connect or (DEFAULT_AGENT_ENDPOINT,)))
+    bus = BusConfig(
+        mode=args.mode,
+        listen=listen,
+        connect=tuple(args.connect or (DEFAULT_AGENT_ENDPOINT,)),
+        config_file=args.zenoh_config,
+    )
     config = SimRobotConfig(
         world=args.world,
         resolution=args.resolution,

@@ -11,11 +11,12 @@ STAMP := $(VENV)/.installed-dev
 BENCH_STAMP := $(VENV)/.installed-bench
 OUT ?= out
 
-.PHONY: help install demo test lint typecheck unit eval bench fuzz clean
+.PHONY: help install demo test lint typecheck unit integration quick eval bench fuzz clean
 
 help:
 	@echo "make demo   install (into .venv) and run the main job: loci demo"
-	@echo "make test   install and run lint, type checks and the tests"
+	@echo "make test   install and run lint, type checks and the tests (unit and contract first)"
+	@echo "make quick  the tests not marked slow (while working)"
 	@echo "make eval   leave-one-building-out and real-log evaluations on ../shared/data (long)"
 	@echo "make bench  benchmarks, as ratios against baselines run in the same process (long)"
 	@echo "make fuzz   reliability probes: a million SICK telegrams, 10,000 messages per bus key, 30 serial replugs (long)"
@@ -44,10 +45,19 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy
 
+# The fast layers first (the pure core, the contracts), so that a broken core fails in the
+# first minute; then real parts together and whole processes (docs/architecture.md).
 unit: $(STAMP)
-	$(BIN)/pytest
+	$(BIN)/pytest tests/unit tests/contract
 
-test: lint typecheck unit
+integration: $(STAMP)
+	$(BIN)/pytest tests/integration tests/e2e
+
+test: lint typecheck unit integration
+
+# The loop while working: every layer, without the tests marked slow.
+quick: $(STAMP)
+	$(BIN)/pytest -m "not slow" -q
 
 eval: $(STAMP)
 	$(BIN)/python -m tools.evaluate_places --out docs/results

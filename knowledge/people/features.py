@@ -6,7 +6,7 @@ them for every segment of a :class:`~knowledge.people.segmentation.Segmentation`
 compiled pass (numba) over the segments. Its sums run in the order of numpy's grouped
 reductions (``np.add.reduceat`` for sums over a segment's points, ``np.bincount`` for sums
 over its steps and triples), so the features agree with the vectorised numpy formulas to
-the last bit, apart from the rounding of ``atan2`` in C.3 and C.13 (tests/test_people_fast.py
+the last bit, apart from the rounding of ``atan2`` in C.3 and C.13 (tests/unit/test_people_fast.py
 keeps that implementation as the reference). Lengths are metres, angles radians, speeds
 metres per second.
 

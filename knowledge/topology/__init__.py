@@ -1,2 +1,3 @@
-"""The topological layer: regions of one label, the region graph, its heuristic correction
-(book Sect. 4.7), the topological map document and pictures, and room-segmentation scores."""
+"""The topological layer (book Sect. 7.2.3): areas of the navigation graph split at doorways,
+their consistency and persistence, the labelled map turned into a topological map document
+(:mod:`~knowledge.topology.pipeline`) with pictures, and room-segmentation scores."""

@@ -1,0 +1,203 @@
+"""Durable before acknowledged (issue 18, failure 5): a fact the robot said "ok" to survives a
+SIGKILL that comes right after the "ok".
+
+``loci run`` runs as a process with the conceptual map on (SQLite, HermiT) and a hand-made
+map of a corridor, a door and a room. The test speaks to it as the dialogue process does,
+and kills it with SIGKILL from inside the callback that receives the last acknowledgement
+(no time for a debounced save or a reasoning to finish). Before the fix, 10 of 82 names
+acknowledged 0.03-0.88 s before a kill were gone after the restart.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+import zenoh
+
+from agent.bus.bridge import publish_stream
+from agent.bus.session import BusConfig, bus_session, listening_endpoints
+from knowledge.conceptual import ConceptualMap
+from knowledge.navigation.graph import DOORWAY, PLACE, GraphParams, NavigationGraph
+from knowledge.topology import persistence
+from knowledge.topology.areas import AreaMap
+
+REPO = Path(__file__).resolve().parents[2]
+ROBOT = "durabot"
+
+
+def small_map() -> NavigationGraph:
+    """A corridor (0..3, 0), a door at (3, 1), a room (3..4, 2..3); the robot in the room."""
+    g = NavigationGraph(GraphParams(node_distance=1.0))
+    corridor = [g.add_node(PLACE, (float(x), 0.0), votes={"corridor": 5}).id for x in range(4)]
+    for a, b in itertools.pairwise(corridor):
+        g.add_edge(a, b)
+    door = g.add_node(DOORWAY, (3.0, 1.0), width=0.9, orientation=math.pi / 2).id
+    room = [g.add_node(PLACE, xy, votes={"room": 5}).id for xy in ((3.0, 2.0), (4.0, 2.0), (4.0, 3.0))]
+    g.add_edge(corridor[-1], door)
+    g.add_edge(door, room[0])
+    g.add_edge(room[0], room[1])
+    g.add_edge(room[1], room[2])
+    g.current = room[2]
+    return g
+
+
+class Agent:
+    """``loci run`` in a subprocess that the test may SIGKILL."""
+
+    def __init__(self, config: Path) -> None:
+        self.lines: list[str] = []
+        self.ready = threading.Event()
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "agent.cli", "run", "--config", str(config)],
+            cwd=REPO,
+            stderr=subprocess.PIPE,
+            stdout=subprocess.DEVNULL,
+            text=True,
+        )
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        assert self.proc.stderr is not None
+        for line in self.proc.stderr:
+            self.lines.append(line)
+            if line.startswith("running robot"):
+                self.ready.set()
+
+    def wait_ready(self, timeout: float = 60.0) -> None:
+        if not self.ready.wait(timeout):
+            self.kill()
+            raise AssertionError("loci run did not start:\n" + "".join(self.lines))
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            os.kill(self.proc.pid, signal.SIGKILL)
+        self.proc.wait(10)
+
+
+class Acks:
+    """Replies on ``dialogue/say``; SIGKILLs the agent from the callback that gets ``kill_on``'s reply."""
+
+    def __init__(self, session: zenoh.Session) -> None:
+        self.replies: dict[str, dict[str, Any]] = {}
+        self.kill_on: str | None = None
+        self.pid: int | None = None
+        self.killed = threading.Event()
+        self._cond = threading.Condition()
+        self._sub = session.declare_subscriber(f"loci/{ROBOT}/dialogue/say", self._on)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        msg = json.loads(sample.payload.to_bytes())
+        iid = msg.get("in_reply_to")
+        if iid is not None and iid == self.kill_on and self.pid is not None:
+            os.kill(self.pid, signal.SIGKILL)  # at once: the reply has just left the agent
+            self.killed.set()
+        with self._cond:
+            if iid is not None:
+                self.replies[iid] = msg
+            self._cond.notify_all()
+
+    def wait(self, iid: str, timeout: float = 30.0) -> dict[str, Any]:
+        with self._cond:
+            if not self._cond.wait_for(lambda: iid in self.replies, timeout):
+                raise AssertionError(f"no reply to {iid}")
+            return self.replies[iid]
+
+
+def write_config(tmp_path: Path, endpoint: str) -> Path:
+    path = tmp_path / "robot.toml"
+    path.write_text(
+        f"""
+[robot]
+name = "{ROBOT}"
+
+[bus]
+listen = ["tcp/127.0.0.1:0"]
+connect = ["{endpoint}"]
+
+[laser]
+source = "bus"
+
+[state]
+dir = "{tmp_path / "state"}"
+save_interval = 30.0
+
+[conceptual]
+debounce = 0.5
+"""
+    )
+    return path
+
+
+@pytest.mark.slow
+def test_every_acknowledged_fact_survives_a_sigkill_right_after_the_acknowledgement(tmp_path: Path) -> None:
+    graph = small_map()
+    areas = AreaMap()
+    areas.update(graph)
+    (tmp_path / "state").mkdir()
+    (tmp_path / "state" / "navgraph.json").write_text(
+        persistence.dumps(persistence.to_document(graph, areas))
+    )
+    room = areas.area_of(graph.current)
+    assert room is not None
+    acknowledged: list[tuple[str, str]] = []  # (kind, word) the robot said ok to
+    n = itertools.count(1)
+    with bus_session(BusConfig()) as session:
+        (endpoint,) = listening_endpoints(session)
+        config = write_config(tmp_path, endpoint)
+        acks = Acks(session)
+        intents = publish_stream(session, ROBOT, "dialogue/intent")
+        for cycle in range(2):
+            agent = Agent(config)
+            try:
+                agent.wait_ready()
+                acks.pid = agent.proc.pid
+                deadline = time.monotonic() + 10
+                while time.monotonic() < deadline:  # the agent's intent subscriber reached us
+                    iid = f"probe-{next(n)}"
+                    intents.put(_intent(iid, "ask_place", {}))
+                    try:
+                        acks.wait(iid, 0.5)
+                        break
+                    except AssertionError:
+                        continue
+                said = [("name", f"the {word} room {cycle}") for word in ("quiet", "blue", "third")]
+                said.append(("object", "couch" if cycle else "chair"))
+                for i, (kind, word) in enumerate(said):
+                    iid = f"c{cycle}-{i}"
+                    if i == len(said) - 1:
+                        acks.kill_on = iid
+                    args = {"name": word} if kind == "name" else {"object": word}
+                    intents.put(_intent(iid, f"assert_{kind}", args))
+                    reply = acks.wait(iid)
+                    assert reply["status"] == "ok", reply
+                    acknowledged.append((kind, word))
+                assert acks.killed.wait(5)
+                acks.killed.clear()
+                assert agent.proc.wait(10) == -signal.SIGKILL
+            finally:
+                agent.kill()
+    # every fact the robot acknowledged is in the conceptual map on disk
+    m = ConceptualMap(tmp_path / "state" / "concepts.sqlite3")
+    try:
+        snap = m.snapshot()
+    finally:
+        m.close()
+    names = set(snap["areas"].get(str(room.id), {}).get("names", []))
+    objects = {name for name, o in snap["objects"].items() if o["area"] == room.id}
+    lost = [w for k, w in acknowledged if w not in (names if k == "name" else objects)]
+    assert len(acknowledged) == 8 and not lost, f"lost after SIGKILL: {lost}"
+
+
+def _intent(iid: str, kind: str, args: dict[str, Any]) -> dict[str, Any]:
+    return {"schema": "loci.intent/1", "id": iid, "speaker": "tutor", "intent": kind, "args": args}

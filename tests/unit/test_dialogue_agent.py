@@ -1,0 +1,345 @@
+"""The agent's side of the dialogue, without a bus: intents in, replies, questions and goals out.
+
+The map is a hand-made corridor, a door and a room (or grown along a path with a false
+doorway); the concepts are :class:`MemoryConcepts` (the conceptual service has its own tests).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import json
+import math
+import types
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pytest
+from support.dialogue import Clock, World, office
+from support.navigation import drive
+
+from agent.bus.schemas import SCHEMAS
+from agent.conversation.agent import DialogueAgent, Outgoing
+from agent.conversation.memory import MemoryConcepts
+from knowledge.navigation.graph import DOORWAY, PLACE, GraphParams, NavigationGraph
+from knowledge.navigation.planning import plan
+from knowledge.topology.areas import AreaCreated, AreaMap, AreasMerged
+
+
+def agent_for(world: World, **kw: Any) -> tuple[DialogueAgent, Clock]:
+    clock = Clock()
+    agent = DialogueAgent(world, MemoryConcepts(), clock=clock, **kw)
+    agent.on_area_events([AreaCreated(a.id, a.label, a.nodes) for a in world.areas.areas.values()])
+    asyncio.run(agent.tick())
+    return agent, clock
+
+
+_ids = itertools.count(1)
+
+
+def intent(kind: str, **args: Any) -> dict[str, Any]:
+    msg = {
+        "schema": "loci.intent/1",
+        "id": f"i{next(_ids)}",
+        "speaker": "tutor",
+        "intent": kind,
+        "args": args,
+    }
+    SCHEMAS.validate(msg)
+    return msg
+
+
+def handle(agent: DialogueAgent, msg: dict[str, Any]) -> tuple[dict[str, Any], list[Outgoing]]:
+    """The one reply to ``msg`` and the other messages; every message is valid on its stream."""
+    out = asyncio.run(agent.handle(msg))
+    for o in out:
+        SCHEMAS.validate(o.message)
+    replies = [
+        o.message for o in out if o.stream == "dialogue/say" and o.message.get("in_reply_to") == msg["id"]
+    ]
+    assert len(replies) == 1, out
+    return replies[0], [o for o in out if o.message is not replies[0]]
+
+
+def area_of(world: World, node: int) -> int:
+    a = world.areas.area_of(node)
+    assert a is not None
+    return a.id
+
+
+def test_ask_place_names_the_current_area() -> None:
+    world, corridor, _, room = office()
+    agent, _ = agent_for(world)
+    world.graph.current = room[2]
+    reply, rest = handle(agent, intent("ask_place"))
+    area = reply["content"]["area"]
+    assert (
+        reply["status"] == "ok" and rest == [] and reply["to"] == "tutor" and reply["intent"] == "ask_place"
+    )
+    assert area["id"] == area_of(world, room[2]) and area["class"] == "room" and area["current"] is True
+    assert reply["text"] == "I am in a room."
+    world.graph.current = corridor[1]
+    reply, _ = handle(agent, intent("ask_place"))
+    assert reply["content"]["area"]["class"] == "corridor" and "corridor" in reply["text"]
+    # the robot on the doorway node: the nearest place node's area
+    world.graph.current = None
+    agent.on_pose((5.9, 2.9, 0.0))
+    assert handle(agent, intent("ask_place"))[0]["content"]["area"]["id"] == area_of(world, room[3])
+
+
+def test_told_names_and_objects_are_remembered_and_found() -> None:
+    world, corridor, _, room = office()
+    agent, _ = agent_for(world)
+    world.graph.current = corridor[0]
+    reply, _ = handle(agent, intent("assert_object", object="the charging station"))
+    assert reply["status"] == "ok" and reply["content"]["node"] == corridor[0]
+    assert reply["content"]["object"] == {"name": "charging station", "kind": "ChargingStation"}
+    assert "charging station" in reply["text"]
+    world.graph.current = room[3]
+    reply, _ = handle(agent, intent("assert_name", name="kitchen"))
+    assert reply["content"]["area"]["names"] == ["kitchen"] and "kitchen" in reply["text"]
+    # ask_where: an object → its area and node; a named area → that area
+    reply, _ = handle(agent, intent("ask_where", target={"head": "charging station", "determiner": "the"}))
+    c = reply["content"]
+    assert c["node"] == corridor[0] and c["area"]["id"] == area_of(world, corridor[0])
+    assert c["area"]["objects"] == [{"name": "charging station", "kind": "ChargingStation"}]
+    assert "charging station" in reply["text"] and "corridor" in reply["text"]
+    reply, _ = handle(agent, intent("ask_where", target={"head": "kitchen"}))
+    assert reply["content"]["area"]["id"] == area_of(world, room[0]) and reply["content"]["area"]["current"]
+    reply, _ = handle(agent, intent("ask_where", target={"head": "piano"}))
+    assert reply["status"] == "ok" and reply["content"]["area"] is None and "do not know" in reply["text"]
+    # a type said by the tutor is the area's type
+    handle(agent, intent("assert_type", type="living room"))
+    assert "LivingRoom" in handle(agent, intent("ask_place"))[0]["content"]["area"]["types"]
+
+
+def test_go_to_plans_over_the_graph_and_reports_when_the_base_is_there() -> None:
+    world, corridor, door, room = office()
+    agent, _ = agent_for(world)
+    world.graph.current = corridor[0]
+    handle(agent, intent("assert_object", object="charging station"))
+    world.graph.current = room[3]
+    agent.on_pose((6.0, 3.0, 0.0))
+    msg = intent("go_to", target={"head": "charging station", "determiner": "the"})
+    reply, rest = handle(agent, msg)
+    (goal,) = [o.message for o in rest if o.stream == "base/goal"]
+    expected = plan(world.graph, room[3], corridor[0])
+    assert expected is not None
+    assert reply["status"] == "accepted" and reply["content"]["node"] == corridor[0]
+    assert reply["content"]["path"] == list(expected.nodes) and door in reply["content"]["path"]
+    assert reply["content"]["distance"] == pytest.approx(expected.distance)
+    # the waypoints: the path's nodes after the one the robot stands on
+    assert [(p["x"], p["y"]) for p in goal["path"]] == [world.graph.node(k).xy for k in expected.nodes[1:]]
+    assert goal["frame_id"] == "odom" and goal["id"].endswith(msg["id"])
+    # the base's reports: another goal's are ignored, this one's ends the task once
+    assert agent.on_base_status({"status": "reached", "goal": "other"}) == []
+    assert agent.on_base_status({"status": "active", "goal": goal["id"]}) == []
+    (report,) = agent.on_base_status({"status": "reached", "goal": goal["id"]})
+    SCHEMAS.validate(report.message)
+    assert report.message["task"] == msg["id"] and report.message["status"] == "ok"
+    assert report.message["content"]["reached"] is True and report.message["content"]["node"] == corridor[0]
+    assert agent.on_base_status({"status": "reached", "goal": goal["id"]}) == []
+    # an area by its class: the middle of the room; a failure is reported as an error
+    agent.on_pose((0.0, 0.0, 0.0))
+    world.graph.current = corridor[0]
+    msg = intent("go_to", target={"head": "room", "determiner": "a"})
+    reply, rest = handle(agent, msg)
+    assert reply["content"]["node"] == room[0]  # the four room nodes are equally central: the nearest
+    (goal,) = [o.message for o in rest if o.stream == "base/goal"]
+    (report,) = agent.on_base_status({"status": "collided", "goal": goal["id"], "reason": "bumped"})
+    assert report.message["status"] == "error" and report.message["reason"] == "bumped"
+    # unknown targets and unreachable ones are refused with a reason
+    reply, rest = handle(agent, intent("go_to", target={"head": "piano"}))
+    assert reply["status"] == "error" and "piano" in reply["reason"] and rest == []
+    lone = world.graph.add_node(PLACE, (30.0, 30.0), votes={"hallway": 1}).id
+    world.areas.update(world.graph)
+    reply, _ = handle(agent, intent("go_to", target={"head": "hallway"}))
+    assert reply["status"] == "error" and "way" in reply["reason"], lone
+
+
+def test_nothing_known_yet_and_unknown_questions_are_errors() -> None:
+    world = World(NavigationGraph(), AreaMap())
+    agent, _ = agent_for(world)
+    for msg in (
+        intent("assert_type", type="kitchen"),
+        intent("go_to", target={"head": "kitchen"}),
+        intent("answer", answer="no"),
+    ):
+        reply, rest = handle(agent, msg)
+        assert reply["status"] == "error" and reply["reason"] and rest == []
+    reply, _ = handle(agent, intent("ask_place"))
+    assert reply["content"] == {"area": None} and reply["text"] == "I do not know where I am."
+
+
+def test_a_malformed_intent_gets_an_error_reply_when_it_has_an_id() -> None:
+    world, *_ = office()
+    agent, _ = agent_for(world)
+    bad = json.dumps({"schema": "loci.intent/1", "id": "x1", "speaker": "t", "intent": "dance"}).encode()
+    out = agent.error_for_raw(bad, "intent 'dance' is unknown")
+    assert out is not None and out.stream == "dialogue/say"
+    SCHEMAS.validate(out.message)
+    assert out.message["in_reply_to"] == "x1" and out.message["status"] == "error"
+    assert "dance" in out.message["reason"]
+    assert agent.error_for_raw(b"{not json", "bad") is None
+    assert agent.error_for_raw(b'{"id": 3}', "bad") is None
+    assert agent.invalid == 3
+
+
+def test_a_false_doorway_is_asked_about_once_and_no_removes_it() -> None:
+    g = NavigationGraph(GraphParams(node_distance=1.0))
+    areas = AreaMap()
+    world = World(g, areas)
+    changed: list[dict[str, Any]] = []
+    agent, _ = agent_for(world, on_map_changed=changed.append)
+    drive(g, [(0.0, 0.0), (6.0, 0.0)], doors=[((3.0, 0.0), 0.0)])
+    agent.on_area_events(areas.update(g))
+    assert not [o for o in asyncio.run(agent.tick()) if o.stream == "dialogue/ask"]
+    concepts = agent.concepts
+    assert isinstance(concepts, MemoryConcepts) and len(concepts.areas) == 2
+    drive(g, [(6.0, 0.0), (6.0, 2.0), (0.0, 2.0), (0.0, 0.0)])
+    events = areas.update(g)
+    assert any(isinstance(e, AreasMerged) for e in events)
+    agent.on_area_events(events)
+    (ask,) = [o.message for o in asyncio.run(agent.tick()) if o.stream == "dialogue/ask"]
+    SCHEMAS.validate(ask)
+    door = ask["about"]["node"]
+    assert ask["text"] == "Was there a door here?" and ask["choices"] == ["yes", "no"]
+    assert ask["about"]["kind"] == "false_doorway" and g.node(door).kind == DOORWAY
+    assert len(concepts.areas) == 1  # the loop closed: the concepts merged the two areas too
+    # asked once: another change of the map does not ask again while the question is open
+    g.add_votes(next(iter(g.place_nodes())).id, {"room": 1})
+    assert not [o for o in asyncio.run(agent.tick()) if o.stream == "dialogue/ask"]
+    reply, _ = handle(agent, intent("answer", answer="maybe", question=ask["id"]))
+    assert reply["status"] == "error" and "yes or no" in reply["reason"]
+    reply, _ = handle(agent, intent("answer", answer="No"))
+    assert reply["status"] == "ok" and reply["content"]["removed"] == door
+    assert door not in g and g.doorway_nodes() == [] and len(areas.areas) == 1
+    assert changed == [{"op": "remove_doorway", "node": door, "reason": changed[0]["reason"]}]
+    assert ask["id"] in changed[0]["reason"]
+    assert not [o for o in asyncio.run(agent.tick()) if o.stream == "dialogue/ask"]
+    reply, _ = handle(agent, intent("answer", answer="no"))
+    assert reply["status"] == "error"  # nothing is open any more
+
+
+def test_a_confirmed_doorway_is_kept_and_never_asked_about_again() -> None:
+    g = NavigationGraph(GraphParams(node_distance=1.0))
+    world = World(g, AreaMap())
+    agent, _ = agent_for(world)
+    drive(g, [(0.0, 0.0), (6.0, 0.0), (6.0, 2.0), (0.0, 2.0), (0.0, 0.0)], doors=[((3.0, 0.0), 0.0)])
+    world.areas.update(g)
+    (ask,) = [o.message for o in asyncio.run(agent.tick()) if o.stream == "dialogue/ask"]
+    reply, _ = handle(agent, intent("answer", answer="yes", question=ask["id"]))
+    assert reply["status"] == "ok" and ask["about"]["node"] in g
+    g.add_votes(g.place_nodes()[0].id, {"room": 1})
+    assert not [o for o in asyncio.run(agent.tick()) if o.stream == "dialogue/ask"]
+
+
+@dataclass
+class Seen:
+    """A recognition as the camera task hands it over (name, kind, score, inliers)."""
+
+    name: str
+    kind: str | None
+    score: float
+    inliers: int
+
+
+def test_look_around_turns_once_and_reports_what_the_camera_recognised() -> None:
+    world, _, _, room = office()
+    reply, _ = handle(agent_for(world)[0], intent("look_around"))
+    assert reply["status"] == "error" and "objects add" in reply["reason"]
+    agent, clock = agent_for(world, can_recognise=True)
+    world.graph.current = room[1]
+    msg = intent("look_around")
+    reply, rest = handle(agent, msg)
+    assert reply["status"] == "accepted" and agent.looking
+    (turn,) = [o.message for o in rest if o.stream == "base/cmd"]
+    assert turn["v"] == 0.0 and turn["omega"] > 0
+    out = asyncio.run(
+        agent.on_detections([Seen("tv", "Television", 0.8, 40), Seen("couch", "Couch", 0.5, 20)], 5.0)
+    )
+    (objects,) = [o.message for o in out]
+    SCHEMAS.validate(objects)
+    assert [(r["name"], r["node"], r["area"]) for r in objects["recognitions"]] == [
+        ("tv", room[1], area_of(world, room[1])),
+        ("couch", room[1], area_of(world, room[1])),
+    ]
+    # still turning: the command is repeated; after a full turn the base stops and the report comes
+    assert [o.stream for o in asyncio.run(agent.tick())] == ["base/cmd"]
+    clock.now += 2 * math.pi / turn["omega"] + 0.1
+    out = asyncio.run(agent.tick())
+    assert [o.stream for o in out] == ["base/cmd", "dialogue/say"] and out[0].message["omega"] == 0.0
+    report = out[1].message
+    SCHEMAS.validate(report)
+    assert report["task"] == msg["id"] and report["intent"] == "look_around"
+    assert report["content"]["objects"] == [
+        {"name": "tv", "kind": "Television"},
+        {"name": "couch", "kind": "Couch"},
+    ]
+    assert {o["name"] for o in report["content"]["area"]["objects"]} == {"tv", "couch"}
+    assert "television" in report["text"] and not agent.looking
+    # the objects are in the concepts: "where is the television?"
+    reply, _ = handle(agent, intent("ask_where", target={"head": "television"}))
+    assert reply["content"]["node"] == room[1]
+
+
+def test_stop_cancels_the_goal() -> None:
+    world, corridor, _, _ = office()
+    agent, _ = agent_for(world)
+    world.graph.current = corridor[0]
+    _, rest = handle(agent, intent("go_to", target={"head": "room"}))
+    (goal,) = [o.message for o in rest if o.stream == "base/goal"]
+    reply, rest = handle(agent, intent("stop"))
+    assert reply["status"] == "ok" and reply["content"]["stopped"] == ["go_to"]
+    assert [o.message.get("cancel") for o in rest if o.stream == "base/goal"] == [True]
+    assert agent.on_base_status({"status": "cancelled", "goal": goal["id"]}) == []
+
+
+def test_follow_me_starts_follow_me_and_stop_ends_it() -> None:
+    pytest.importorskip("agent.core.follow", reason="follow-me (agent/core/follow.py) is not there yet")
+    world, corridor, _, _ = office()
+    agent, _ = agent_for(world)
+    world.graph.current = corridor[0]
+    reply, rest = handle(agent, intent("follow_me"))
+    assert reply["status"] == "accepted" and rest == [] and agent.follow is not None
+    reply, rest = handle(agent, intent("stop"))
+    assert reply["content"]["stopped"] == ["follow_me"] and agent.follow is None
+
+
+def test_follow_me_follows_the_pipelines_people_and_is_refused_without_them() -> None:
+    """The people come with each scan (the pipeline's frame); follow-me makes goals from them."""
+    pytest.importorskip("agent.core.follow", reason="follow-me (agent/core/follow.py) is not there yet")
+    from knowledge.people.detector import LegDetector
+    from knowledge.people.pairing import pair_legs
+    from knowledge.people.pipeline import PeopleFrame
+    from knowledge.people.tracking import TrackState
+
+    world, *_ = office()
+    off, _ = agent_for(world, people=False)
+    reply, _ = handle(off, intent("follow_me"))
+    assert reply["status"] == "error" and "people detection is off" in reply["text"]
+
+    agent, clock = agent_for(world)
+    handle(agent, intent("follow_me"))
+
+    empty = LegDetector.load().detect(np.full(360, 3.0), 0.0, math.pi / 180, range_max=30.0)
+
+    def Frame(tracks: list[TrackState]) -> PeopleFrame:  # noqa: N802 - reads as the class it makes
+        return PeopleFrame(clock(), empty, np.zeros((0, 2)), pair_legs(np.zeros((0, 2))), tracks)
+
+    def person(x: float, y: float) -> TrackState:
+        return TrackState(3, np.array([x, y]), np.zeros(2), np.eye(4) * 0.01, 5, 0, 5, 0.0, clock())
+
+    scan = types.SimpleNamespace(stamp=clock() + 0.1)
+    out = agent.on_scan(scan, (0.0, 0.0, 0.0), Frame([person(3.0, 0.0)]))
+    goals = [o.message for o in out if o.stream == "base/goal"]
+    assert len(goals) == 1 and goals[0]["goal"]["x"] == pytest.approx(2.0)  # 1 m short of the person
+    assert all(o.stream != "people" for o in out)  # the runtime publishes the people, every scan
+    # the person vanished: once, go and look where they were last seen (0.5 m short of it)...
+    chase = agent.on_scan(types.SimpleNamespace(stamp=clock() + 0.2), (0.0, 0.0, 0.0), None)
+    goals = [o.message for o in chase if o.stream == "base/goal"]
+    assert len(goals) == 1 and goals[0]["goal"]["x"] == pytest.approx(2.5)
+    # ...then no new goal while nobody is seen
+    quiet = agent.on_scan(types.SimpleNamespace(stamp=clock() + 0.3), (0.0, 0.0, 0.0), None)
+    assert all(o.stream != "base/goal" for o in quiet)

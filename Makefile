@@ -9,6 +9,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-dev
 BENCH_STAMP := $(VENV)/.installed-bench
+EVAL_STAMP := $(VENV)/.installed-eval
 OUT ?= out
 
 .PHONY: help install demo test lint typecheck unit eval bench clean
@@ -31,6 +32,10 @@ $(BENCH_STAMP): $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[dev,bench]'
 	@touch $@
 
+$(EVAL_STAMP): $(STAMP)
+	$(BIN)/python -m pip install --quiet -e '.[dev,eval]'
+	@touch $@
+
 install: $(STAMP)
 
 demo: $(STAMP)
@@ -48,10 +53,11 @@ unit: $(STAMP)
 
 test: lint typecheck unit
 
-eval: $(STAMP)
+eval: $(EVAL_STAMP)
 	$(BIN)/python -m agent.tools.evaluate_places --out docs/results
 	$(BIN)/python -m agent.tools.evaluate_topology --out docs/results
 	$(BIN)/python -m agent.tools.evaluate_real_logs --out docs/results
+	$(BIN)/python -m agent.tools.evaluate_localization --out docs/results
 
 bench: $(BENCH_STAMP)
 	$(BIN)/python -m agent.tools.bench --out docs/results

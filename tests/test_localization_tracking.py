@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from localization_world import ANGLES, RANGE_MAX, drifting_odometry, path, scans, world
 
-from knowledge.localization.likelihood import LikelihoodField, distance_field
+from knowledge.localization.likelihood import LikelihoodField, distance_field, surface
 from knowledge.localization.scan_matching import MatchParams, ScanMatcher, scan_points
 from knowledge.localization.se2 import compose, wrap
 from knowledge.localization.tracking import PoseTracker
@@ -20,14 +20,20 @@ def setting() -> tuple:
     return g, truth, scans(g, truth), drifting_odometry(truth)
 
 
+def test_surface_leaves_out_the_inside_of_solid_blocks() -> None:
+    occ = np.zeros((7, 7), dtype=bool)
+    occ[1:6, 1:6] = True
+    s = surface(occ)
+    assert s[1, 1] and s[1, 3] and s[5, 5] and not s[3, 3] and not s[2:5, 2:5].any()
+
+
 def test_distance_field_by_hand() -> None:
     occ = np.zeros((5, 7), dtype=bool)
     occ[2, 3] = True
     d = distance_field(occ, 0.1, 0.25)
     assert d[2, 3] == 0.0
-    assert d[2, 4] == pytest.approx(0.05, abs=1e-4)  # half a cell from the occupied cell's face
-    assert d[2, 5] == pytest.approx(0.15, abs=1e-4)
-    assert d[0, 0] == pytest.approx(0.25)  # clipped (0.31 m)
+    assert d[2, 5] == pytest.approx(0.2, abs=1e-4)
+    assert d[0, 0] == pytest.approx(0.25)  # clipped (0.36 m)
     assert distance_field(np.zeros((2, 2), dtype=bool), 0.1, 1.0).min() == 1.0
 
 

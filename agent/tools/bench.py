@@ -49,6 +49,12 @@ BENCHMARKS: list[tuple[str, str, list[str], str]] = [
         "the agent per scan: latency telegram → place (target p99 < 5 ms), sustained rate, memory over an hour",
     ),
     (
+        "localization",
+        "agent.tools.bench_localization",
+        [],
+        "the particle filter: updates per second against particles, 180 beams, one core (target 10,000 at ≥ 10 Hz)",
+    ),
+    (
         "replay",
         "agent.tools.bench_replay",
         [],
@@ -67,6 +73,7 @@ JSON_FILE = {
     "conceptual",
     "objects",
     "replay",
+    "localization",
 }
 
 

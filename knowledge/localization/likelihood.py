@@ -21,6 +21,7 @@ import math
 from dataclasses import dataclass
 
 import cv2
+import numba
 import numpy as np
 import numpy.typing as npt
 
@@ -30,28 +31,38 @@ from knowledge.metric.grid import OccupancyGrid
 __all__ = ["LikelihoodField", "distance_field", "surface"]
 
 
-def surface(occupied: np.ndarray, free: np.ndarray) -> np.ndarray:
-    """The occupied cells that touch a free cell (8-neighbours): where a laser beam coming
-    through free space can end. The inside of a thick wall or a solid block is not."""
+@numba.njit(cache=True, nogil=True)
+def _gauss(d: np.ndarray, k: float) -> np.ndarray:
+    out = np.empty(d.shape, dtype=np.float32)
+    for i in range(d.shape[0]):
+        for j in range(d.shape[1]):
+            v = d[i, j]
+            out[i, j] = math.exp(k * v * v)
+    return out
+
+
+def surface(occupied: np.ndarray) -> np.ndarray:
+    """The occupied cells that are not inside an obstacle (not all of their 8 neighbours are
+    occupied): where a laser beam can end. The inside of a thick wall or a solid block is
+    not; a map built from scans has only such cells anyway."""
     occ = np.asarray(occupied, dtype=bool)
-    near_free = cv2.dilate(np.asarray(free, dtype=np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
-    return occ & near_free
+    inner = cv2.erode(occ.astype(np.uint8), np.ones((3, 3), np.uint8), borderValue=1).astype(bool)
+    return occ & ~inner
 
 
 def distance_field(occupied: np.ndarray, resolution: float, max_distance: float) -> np.ndarray:
     """``(rows, cols)`` float32 metres from each cell's centre to the nearest occupied cell,
     clipped at ``max_distance`` (and ``max_distance`` everywhere when nothing is occupied).
 
-    The distance is to the occupied cell's centre less half a cell: an obstacle's surface
-    lies somewhere in its cell, and a ray cast or a laser endpoint on the cell's near face is
-    0 m from it, not half a cell (without this, matching pulls scans half a cell into the
-    walls they face). Exact Euclidean distances (OpenCV's precise distance transform)."""
+    Distances are between cell centres: an endpoint on an obstacle cell's near face (where a
+    ray cast stops) is half a cell from it. Exact Euclidean distances (OpenCV's precise
+    distance transform)."""
     occ = np.asarray(occupied, dtype=bool)
     if not occ.any():
         return np.full(occ.shape, max_distance, dtype=np.float32)
     src = np.where(occ, 0, 255).astype(np.uint8)
-    d = cv2.distanceTransform(src, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) - np.float32(0.5)
-    return np.clip(d * np.float32(resolution), 0.0, np.float32(max_distance)).astype(np.float32)
+    d = cv2.distanceTransform(src, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    return np.minimum(d * np.float32(resolution), np.float32(max_distance)).astype(np.float32)
 
 
 @dataclass(frozen=True, eq=False)
@@ -83,7 +94,7 @@ class LikelihoodField:
         occ = np.ascontiguousarray(grid.occupied[::-1])
         free = np.ascontiguousarray(grid.free[::-1])
         return cls(
-            distance_field(surface(occ, free), grid.resolution, max_distance),
+            distance_field(surface(occ), grid.resolution, max_distance),
             free,
             occ,
             float(grid.resolution),
@@ -99,8 +110,7 @@ class LikelihoodField:
         """``(rows, cols)`` float32 ``exp(−d²/2σ²)``: 1 on obstacles, falling off around them."""
         if not sigma > 0:
             raise ValueError(f"sigma must be a positive number of metres, got {sigma}")
-        d = self.distance.astype(np.float64)
-        return np.exp(-0.5 * (d / sigma) ** 2).astype(np.float32)
+        return _gauss(self.distance, -0.5 / (sigma * sigma))
 
     def to_map(self, poses: npt.ArrayLike) -> np.ndarray:
         """World poses ``(..., 3)`` in the frame of the field's lower-left corner (no yaw)."""

@@ -15,8 +15,9 @@ to the nearest obstacle, :class:`~knowledge.localization.likelihood.LikelihoodFi
   one (a sharp optimum). Sub-cell accurate, a few hundred microseconds, but it only finds the
   optimum whose basin the prior lies in.
 
-:meth:`ScanMatcher.match` refines the prior and runs the search first only when the refined
-fit is poor (``search="auto"``), or always, or never. Poses here are the laser's, in the
+:meth:`ScanMatcher.match` refines the prior; it also refines the search's best pose, and
+keeps whichever fits better, when the refined fit is poor or the caller asks
+(``search="auto"``), or always, or never. Poses here are the laser's, in the
 field's map frame (:meth:`~knowledge.localization.likelihood.LikelihoodField.to_map`); scan
 points are ``(M, 2)`` metres in the laser's frame.
 """
@@ -261,8 +262,11 @@ class ScanMatcher:
         dj, di, k, _ = _correlate(mf.scores[-1], points, x, y, th, res, n_lin, angles)
         return np.array([x + dj * res, y + di * res, th + float(angles[k])])
 
-    def match(self, mf: MatchField, points: np.ndarray, prior: npt.ArrayLike) -> MatchResult:
-        """The pose of the scan ``points`` near ``prior`` (see the module docstring)."""
+    def match(
+        self, mf: MatchField, points: np.ndarray, prior: npt.ArrayLike, *, search: bool = False
+    ) -> MatchResult:
+        """The pose of the scan ``points`` near ``prior`` (see the module docstring);
+        ``search``: search first whatever the mode (the caller knows the prior is weak)."""
         prm = self.params
         pts = np.ascontiguousarray(points, dtype=np.float64)
         if pts.ndim != 2 or pts.shape[1] != 2:
@@ -271,11 +275,8 @@ class ScanMatcher:
         searched = False
         if pts.shape[0] == 0:
             return MatchResult(start.copy(), 0.0, False, np.zeros((3, 3)), 0)
-        if prm.search == "always":
-            start = self.search(mf, pts, start)
-            searched = True
         pose, fit, H = self.refine(mf, pts, start)
-        if prm.search == "auto" and fit < prm.min_fit:
+        if prm.search == "always" or (prm.search == "auto" and (search or fit < prm.min_fit)):
             cand, cfit, cH = self.refine(mf, pts, self.search(mf, pts, start))
             searched = True
             if cfit > fit:

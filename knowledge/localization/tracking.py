@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from knowledge.localization.likelihood import LikelihoodField, distance_field, surface
+from knowledge.localization.likelihood import LikelihoodField, distance_field
 from knowledge.localization.scan_matching import MatchField, MatchParams, ScanMatcher, scan_points
 from knowledge.localization.se2 import between, compose, inverse
 from knowledge.metric.grid import OccupancyGrid
@@ -56,7 +56,7 @@ class TrackingParams:
         max_distance: metres, where the likelihood field's distances are clipped.
     """
 
-    match: MatchParams = field(default_factory=MatchParams)
+    match: MatchParams = field(default_factory=lambda: MatchParams(angular_window=0.4, min_fit=0.8))
     max_range: float = 20.0
     beam_step: int = 2
     accept_fit: float = 0.3
@@ -208,7 +208,7 @@ class PoseTracker:
                 pose[0] - prm.window, pose[1] - prm.window, pose[0] + prm.window, pose[1] + prm.window
             )
             lf = LikelihoodField(
-                distance_field(surface(occ, free), prm.resolution, prm.max_distance),
+                distance_field(occ, prm.resolution, prm.max_distance),
                 free,
                 occ,
                 prm.resolution,

@@ -17,6 +17,11 @@ takes the matched pose and updates ``C``. Two kinds of map:
   there, which bounds the drift (docs/localization.md has how far on real logs).
 * **known** (``prior``): one likelihood field of the whole map; nothing is integrated.
 
+Odometry that stalls and then jumps (the raw CSAIL log has such jumps, up to 1.5 rad between
+two scans) would throw the prediction beyond any search window: when the fit from the
+odometry's prediction is poor and the motion the tracker saw last points elsewhere, the
+scan is also matched (with the search) from there, and the better fit wins.
+
 A scan whose fit stays below ``accept_fit`` (too few endpoints near mapped walls: an open
 hall, a scan full of people, the first seconds) keeps the odometry's prediction. All poses
 are the laser's ``(x, y, theta)``, metres and radians.
@@ -129,6 +134,8 @@ class PoseTracker:
             MappingParams(resolution=self.params.resolution, max_range=self.params.max_range)
         )
         self._last_integrated: np.ndarray | None = None
+        self._last_pose: np.ndarray | None = None
+        self._last_step: np.ndarray | None = None
         self._window_centre: np.ndarray | None = None
         self._since_refresh = 0
         self.scans = 0
@@ -165,10 +172,23 @@ class PoseTracker:
         mf = self._field_for(predicted)
         if mf is not None and pts.shape[0] >= 10:
             res = self.matcher.match(mf, pts, mf.field.to_map(predicted))
+            # odometry that stalled and then jumped (a turn of 1.5 rad between two scans on
+            # the CSAIL log) gives a prediction no search window reaches: when the fit is
+            # poor, the motion the tracker saw last is tried as well
+            if res.fit < prm.match.min_fit and self._last_pose is not None and self._last_step is not None:
+                steady = compose(self._last_pose, self._last_step)
+                d = between(steady, predicted)
+                if math.hypot(d[0], d[1]) > prm.match.linear_window or abs(d[2]) > prm.match.angular_window:
+                    alt = self.matcher.match(mf, pts, mf.field.to_map(steady), search=True)
+                    if alt.fit > res.fit:
+                        res = alt
             fit, searched = res.fit, res.searched
             if fit >= prm.accept_fit:
                 pose = mf.field.to_world(res.pose)
                 matched = True
+        if self._last_pose is not None:
+            self._last_step = between(self._last_pose, pose)
+        self._last_pose = pose
         self.correction = compose(pose, inverse(o))
         integrated = False
         if not self._prior and self._should_integrate(pose):

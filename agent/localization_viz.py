@@ -67,7 +67,7 @@ def particles_picture(
         img = map_canvas(grid, scale)
         for x, y in _px(grid, particles, scale):
             if 0 <= y < img.shape[0] and 0 <= x < img.shape[1]:
-                img[y, x] = (200, 90, 20)
+                cv2.circle(img, (int(x), int(y)), 1, (210, 80, 0), -1)
         if truth is not None:
             c = _px(grid, truth[None, :], scale)[0]
             tip = _px(

@@ -119,3 +119,13 @@ def test_match_scans_in_order_with_repeats_and_strangers() -> None:
     ref = [np.array([1.000000, 2.50]), np.array([1.0, 2.0]), np.array([9.0, 9.0]), np.array([1.0, 2.5])]
     assert match_scans(raw, ref) == [(2, 0), (4, 1), (5, 3)]
     assert match_scans(raw, []) == []
+
+
+def test_convergence_and_distance_driven() -> None:
+    from knowledge.localization.evaluation import convergence, odometry_distance
+
+    assert convergence([2.0, 0.3, 0.9, 0.4, 0.2]) == 3  # below 0.5 from the 4th on
+    assert convergence([0.1, 0.2]) == 0
+    assert convergence([0.1, 0.7]) is None  # ends above: not converged
+    assert convergence([]) is None
+    assert np.allclose(odometry_distance([[0, 0, 0], [3, 4, 1], [3, 5, 0]]), [0.0, 5.0, 6.0])

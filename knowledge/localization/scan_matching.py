@@ -71,7 +71,7 @@ class MatchParams:
         angular_step: radians between searched headings.
     """
 
-    sigmas: tuple[float, ...] = (0.25, 0.1)
+    sigmas: tuple[float, ...] = (0.25, 0.1, 0.05)
     iterations: int = 8
     search: str = "auto"
     min_fit: float = 0.5

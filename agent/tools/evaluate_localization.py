@@ -632,7 +632,7 @@ def main(argv: list[str] | None = None) -> int:
             for i, P in sorted(r.snapshots.items()):
                 near = min(tr, key=lambda k: abs(k - i))
                 panels.append(
-                    (f"{name.split(',')[1].strip()}: scan {i} (+{i - r.start})", P[::4], d["truth"][tr[near]])
+                    (f"{name.split(',')[1].strip()}: scan {i} (+{i - r.start})", P, d["truth"][tr[near]])
                 )
         if panels:
             write_image(

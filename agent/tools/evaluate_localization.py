@@ -64,6 +64,10 @@ GLOBAL = MclParams(particles=10_000)
 CONFIGS: dict[str, MclParams] = {
     "MCL, laser": replace(GLOBAL, semantic_weight=0.0),
     "MCL, laser + semantic (eq. 6.3)": GLOBAL,
+    "MCL, laser + semantic weighted 0.3": replace(GLOBAL, semantic_weight=0.3),
+    "MCL, laser, 100,000 particles at the start": replace(
+        GLOBAL, semantic_weight=0.0, initial_particles=100_000
+    ),
     "odometry + map only (book, no laser)": replace(GLOBAL, laser=False, semantic_weight=0.0),
     "odometry + map + semantic (book, no laser)": replace(GLOBAL, laser=False),
 }

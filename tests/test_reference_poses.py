@@ -70,3 +70,45 @@ def test_csail_corrected_poses_match_406_raw_scans(shared_data: Path, tmp_path: 
     assert stamps.size == 406 and np.all(np.diff(stamps) > 0)
     # the corrected frame starts near the origin, the raw odometry near (576, 0)
     assert np.hypot(*poses[0, :2]) < 1.0
+
+
+@pytest.mark.data
+@pytest.mark.slow
+def test_csail_replayed_with_tracking_follows_the_corrected_poses(shared_data: Path, tmp_path: Path) -> None:
+    """``loci replay`` of the raw CSAIL log with ``[localization] tracking``: its first 560 scans
+    (the first 3,000 lines) stay within 0.3 m RMS of the corrected poses; raw odometry does not."""
+    from dataclasses import replace
+
+    from agent.commands.replay import read_recording_metadata, replay_recording
+    from agent.pipeline import PipelineParams
+    from knowledge.localization.tracking import TrackingParams
+    from knowledge.localization.trajectory import associate, ate
+
+    logs = shared_data / "logs"
+    import_log(
+        prefix_log(logs / "csail-oldcarmen.log.gz", tmp_path / "head.log.gz", 3000), tmp_path / "raw.mcap"
+    )
+    rec = tmp_path / "csail.mcap"
+    add_reference(tmp_path / "raw.mcap", logs / "csail-corrected.log.gz", rec)
+    base = PipelineParams.from_table(json.loads(read_recording_metadata(rec)["pipeline"]))
+    got: dict[str, list] = {"on": [], "off": []}
+    for key, params in (("on", replace(base, localization=TrackingParams())), ("off", base)):
+        out = replay_recording(rec, params=params, on_step=lambda r, k=key: got[k].append(r))
+        assert out.accounting()["balanced"]
+    stamps, truth = read_truth(rec, "head")
+    for key in got:
+        st = np.array([r.stamp for r in got[key]])
+        est = np.array([[r.pose.x, r.pose.y, r.pose.theta] for r in got[key]])
+        pairs = associate(st, stamps, 1e-3)
+        assert len(pairs) > 50
+        got[key] = [ate(truth[pairs[:, 1]], est[pairs[:, 0]])[0].rmse]  # type: ignore[list-item]
+    assert got["on"][0] < 0.3 < got["off"][0]
+
+
+def prefix_log(src: Path, dst: Path, lines: int) -> Path:
+    with gzip.open(src, "rt") as f, gzip.open(dst, "wt") as g:
+        for k, line in enumerate(f):
+            if k >= lines:
+                break
+            g.write(line)
+    return dst

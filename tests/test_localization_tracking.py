@@ -92,3 +92,19 @@ def test_tracking_in_a_known_map_starting_from_the_true_pose(setting: tuple) -> 
     err = np.hypot(*(est[:, :2] - truth[:, :2]).T)
     assert err.max() < 0.05
     assert tracker.mapper.scans == 0  # a known map is not added to
+
+
+def test_a_match_never_ends_further_than_the_window_from_its_prior(setting: tuple) -> None:
+    g, truth, R, _ = setting
+    lf = LikelihoodField.from_grid(g, 1.0)
+    matcher = ScanMatcher()
+    mf = matcher.field(lf)
+    prm = matcher.params
+    pts = scan_points(R[5], ANGLES, range_max=RANGE_MAX)
+    for dx in (0.2, 0.8, 1.5):  # along the corridor: the refinement would slide back to the truth
+        prior = lf.to_map(truth[5] + np.array([dx, 0.0, 0.0]))
+        res = matcher.match(mf, pts, prior)
+        moved = float(np.hypot(*(res.pose[:2] - prior[:2])))
+        assert moved <= prm.linear_window + max(prm.sigmas) + 1e-9
+        if dx < prm.linear_window:
+            assert np.hypot(*(lf.to_world(res.pose)[:2] - truth[5][:2])) < 0.05  # within reach: found

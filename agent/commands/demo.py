@@ -51,6 +51,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="type the tutor's lines yourself; 'Follow me.' also makes the tutor walk the next leg",
     )
     p.add_argument("--no-replay", action="store_true", help="skip replaying the recording at the end")
+    p.add_argument(
+        "--odometry",
+        choices=("exact", "noisy"),
+        default="exact",
+        help="exact (default): the simulated odometry is the true pose; noisy: the base's odometry "
+        "drifts (drivers.sim.base.OdometryNoise) and the agent tracks its pose by scan matching",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON at the end")
     p.set_defaults(handler=cmd_demo)
 
@@ -66,6 +73,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         speed=args.speed,
         interactive=args.interactive,
         replay=not args.no_replay,
+        odometry=args.odometry,
     )
     import signal
 

@@ -17,7 +17,9 @@ to the nearest obstacle, :class:`~knowledge.localization.likelihood.LikelihoodFi
 
 :meth:`ScanMatcher.match` refines the prior; it also refines the search's best pose, and
 keeps whichever fits better, when the refined fit is poor or the caller asks
-(``search="auto"``), or always, or never. Poses here are the laser's, in the
+(``search="auto"``), or always, or never. A refinement that ends further from the prior than
+the search window (plus the widest ``σ``) is not taken: along a corridor, with a person
+walking ahead, it can slide a metre. Poses here are the laser's, in the
 field's map frame (:meth:`~knowledge.localization.likelihood.LikelihoodField.to_map`); scan
 points are ``(M, 2)`` metres in the laser's frame.
 """
@@ -276,9 +278,28 @@ class ScanMatcher:
         if pts.shape[0] == 0:
             return MatchResult(start.copy(), 0.0, False, np.zeros((3, 3)), 0)
         pose, fit, H = self.refine(mf, pts, start)
+        if not self._within(start, pose):
+            pose, fit, H = self._stay(mf, pts, start)
         if prm.search == "always" or (prm.search == "auto" and (search or fit < prm.min_fit)):
             cand, cfit, cH = self.refine(mf, pts, self.search(mf, pts, start))
             searched = True
-            if cfit > fit:
+            if cfit > fit and self._within(start, cand):
                 pose, fit, H = cand, cfit, cH
         return MatchResult(pose, fit, searched, H, int(pts.shape[0]))
+
+    def _within(self, start: np.ndarray, pose: np.ndarray) -> bool:
+        """Whether ``pose`` lies within the search window (plus the widest σ) of ``start``: a
+        refinement that slid further (along a corridor, after a person walking ahead) is not
+        taken."""
+        prm = self.params
+        d = math.hypot(pose[0] - start[0], pose[1] - start[1])
+        a = abs(math.atan2(math.sin(pose[2] - start[2]), math.cos(pose[2] - start[2])))
+        return d <= prm.linear_window + max(prm.sigmas) and a <= prm.angular_window + 0.1
+
+    def _stay(
+        self, mf: MatchField, pts: np.ndarray, start: np.ndarray
+    ) -> tuple[np.ndarray, float, np.ndarray]:
+        H, _, fit = _gn_system(
+            mf.scores[-1], pts, float(start[0]), float(start[1]), float(start[2]), mf.resolution
+        )
+        return start.copy(), float(fit), H

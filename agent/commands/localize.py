@@ -141,6 +141,11 @@ def _localize(args: argparse.Namespace) -> int:
     if args.particles < 1:
         raise ValueError(f"--particles must be >= 1, got {args.particles}")
     grid = OccupancyGrid.load(args.map, args.resolution)
+    codes = None
+    if args.labels is not None:  # checked before the replay, which takes a while
+        codes = lbl.read_label_image(args.labels)
+        if codes.shape != grid.shape:
+            raise DataError(f"{args.labels}: {codes.shape} labels for a {grid.shape} map")
     model = PlaceModel.load(args.model) if args.model else None
     with Progress(enabled=sys.stderr.isatty() and not args.quiet) as progress:
         run = collect_run(args.recording, model=model, progress=progress)
@@ -148,10 +153,7 @@ def _localize(args: argparse.Namespace) -> int:
         raise DataError(f"{args.recording}: no scan was processed")
     field = LikelihoodField.from_grid(grid)
     semantic = None
-    if args.labels is not None:
-        codes = lbl.read_label_image(args.labels)
-        if codes.shape != grid.shape:
-            raise DataError(f"{args.labels}: {codes.shape} labels for a {grid.shape} map")
+    if args.labels is not None and codes is not None:
         legend = {**lbl.CLASS_NAMES, **lbl.read_legend(args.labels)}
         semantic = SemanticMap.from_codes(codes, legend, run.classes, _confusion(args.confusion, run.classes))
     prm = MclParams(particles=args.particles)

@@ -9,6 +9,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-dev
 BENCH_STAMP := $(VENV)/.installed-bench
+EVAL_STAMP := $(VENV)/.installed-eval
 OUT ?= out
 
 .PHONY: help install demo test lint typecheck unit integration quick eval bench fuzz clean
@@ -31,6 +32,10 @@ $(STAMP): pyproject.toml
 
 $(BENCH_STAMP): $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[dev,bench]'
+	@touch $@
+
+$(EVAL_STAMP): $(STAMP)
+	$(BIN)/python -m pip install --quiet -e '.[dev,eval]'
 	@touch $@
 
 install: $(STAMP)
@@ -59,10 +64,11 @@ test: lint typecheck unit integration
 quick: $(STAMP)
 	$(BIN)/pytest -m "not slow" -q
 
-eval: $(STAMP)
+eval: $(EVAL_STAMP)
 	$(BIN)/python -m tools.evaluate_places --out docs/results
 	$(BIN)/python -m tools.evaluate_topology --out docs/results
 	$(BIN)/python -m tools.evaluate_real_logs --out docs/results
+	$(BIN)/python -m tools.evaluate_localization --out docs/results
 	$(BIN)/python -m tools.evaluate_people_tracks --out docs/results
 	$(BIN)/python -m tools.evaluate_follow --seeds 0-7 --out docs/results
 

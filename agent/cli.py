@@ -27,6 +27,7 @@ COMMAND_MODULES: list[str] = [
     "agent.commands.run",
     "agent.commands.replay",
     "agent.commands.evaluate",
+    "agent.commands.localize",
     "agent.commands.dialogue",
     "agent.commands.objects",
 ]

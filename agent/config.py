@@ -24,7 +24,8 @@ where the graph persists; ``[record]`` an optional MCAP recording; ``[diagnostic
 ``[camera]`` the camera's frames; ``[conceptual]`` the conceptual map (OWL, reasoner);
 ``[objects]`` the object database of the recogniser; ``[follow]`` follow-me; ``[people]``
 people detection in every scan and the masking of their legs; ``[foxglove]`` the live view
-(:mod:`agent.live`); ``[ros2]`` the ROS 2 interface over Zenoh (:mod:`agent.ros2`).
+(:mod:`agent.live`); ``[ros2]`` the ROS 2 interface over Zenoh (:mod:`agent.ros2`);
+``[localization]`` pose tracking by scan matching (off unless configured).
 """
 
 from __future__ import annotations
@@ -384,6 +385,34 @@ class PeopleConfig:
 
 
 @dataclass(frozen=True)
+class LocalizationConfig:
+    """``[localization]``: correct the odometry by matching each scan against the map built
+    so far (:class:`~knowledge.localization.tracking.PoseTracker`; docs/localization.md).
+    Off unless configured: the graph, the areas and the local map then live in the corrected
+    ``map`` frame and ``tf/map`` carries the map -> odom transform.
+
+    Attributes:
+        tracking: run the tracker on every scan.
+        max_range: metres; longer beams are not matched.
+        beam_step: match every ``beam_step``-th beam.
+        accept_fit: the least mean score of a match that is taken.
+    """
+
+    tracking: bool = False
+    max_range: float = 20.0
+    beam_step: int = 2
+    accept_fit: float = 0.3
+
+    def tracking_params(self) -> Any:
+        """The tracker's parameters, or None when tracking is off."""
+        if not self.tracking:
+            return None
+        from knowledge.localization.tracking import TrackingParams
+
+        return TrackingParams(max_range=self.max_range, beam_step=self.beam_step, accept_fit=self.accept_fit)
+
+
+@dataclass(frozen=True)
 class AgentConfig:
     """The whole configuration (see the module docstring); build it with :func:`load_config`."""
 
@@ -406,6 +435,7 @@ class AgentConfig:
     people: PeopleConfig = field(default_factory=PeopleConfig)
     foxglove: FoxgloveConfig = field(default_factory=FoxgloveConfig)
     ros2: Ros2Config = field(default_factory=Ros2Config)
+    localization: LocalizationConfig = field(default_factory=LocalizationConfig)
     file: Path | None = None
 
     @property
@@ -446,6 +476,7 @@ _SECTIONS = (
     "people",
     "foxglove",
     "ros2",
+    "localization",
 )
 
 
@@ -599,5 +630,6 @@ def _build(data: Mapping[str, Mapping[str, Any]], file: Path | None, env: Mappin
         people=build_dataclass(PeopleConfig, sec("people"), "people"),
         foxglove=build_dataclass(FoxgloveConfig, sec("foxglove"), "foxglove"),
         ros2=ros2,
+        localization=build_dataclass(LocalizationConfig, sec("localization"), "localization"),
         file=file,
     )

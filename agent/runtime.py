@@ -35,7 +35,8 @@ subscriptions keep 256 samples each (drop-oldest, counted); the recorder waits (
 None of them drops while the agent keeps up; the diagnostics and the final report say if
 one did.
 
-Published per processed scan: ``place`` (``loci.place/1``), ``tf`` (odom → laser),
+Published per processed scan: ``place`` (``loci.place/1``), ``tf`` (odom → laser; map →
+laser with ``[localization]`` tracking, which also publishes ``tf/map``, map → odom),
 ``scan/full`` (the 360° scan); with ``[people]`` on, for each scan with legs or tracks in
 it (and one empty message after the last such scan, which clears the picture) ``people``
 (``loci.people/1``, tracks in the odometry frame) and ``people/scene``
@@ -329,6 +330,7 @@ class Agent:
             "people/scene",
             "objects",
             "map/edit",
+            "tf/map",
         ):
             self._pubs[stream] = publish_stream(session, self.robot, stream, stats=self.stats)
         if self.config.laser.source == "lms":
@@ -579,6 +581,10 @@ class Agent:
         assert place is not None
         self._pubs["place"].put_bytes(place)
         self._pubs["tf"].put(frame_transform(result.pose, result.scan.frame_id))
+        if result.correction is not None:  # [localization]: the map -> odom correction
+            c = result.correction
+            m2o = Pose2D(float(c[0]), float(c[1]), float(c[2]), stamp=result.stamp, frame_id="map")
+            self._pubs["tf/map"].put(frame_transform(m2o, "odom"))
         assert self.pipeline is not None
         self._pubs["scan/full"].put(full_scan_message(result, self.pipeline.params.rear_beams.max_range))
         if result.people is not None:

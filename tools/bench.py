@@ -55,6 +55,12 @@ BENCHMARKS: list[tuple[str, str, list[str], str]] = [
         "the Foxglove live view's cost per scan: off, served with no client, watched by one client (target p99 < 5 ms)",
     ),
     (
+        "localization",
+        "tools.bench_localization",
+        [],
+        "the particle filter: updates per second against particles, 180 beams, one core (target 10,000 at ≥ 10 Hz)",
+    ),
+    (
         "replay",
         "tools.bench_replay",
         [],
@@ -73,6 +79,7 @@ JSON_FILE = {
     "conceptual",
     "objects",
     "replay",
+    "localization",
 }
 
 

@@ -135,6 +135,17 @@ SAMPLES: dict[str, dict[str, Any]] = {
     },
     "loci.map_edit/1": {"schema": "loci.map_edit/1", "op": "remove_doorway", "node": 7, "after_scan": _NOW},
     "loci.truth/1": {"schema": "loci.truth/1", "stamp": _NOW, "x": 1.0, "y": 2.0, "theta": 0.0, "space": 3},
+    "loci.pose/1": {
+        "schema": "loci.pose/1",
+        "stamp": _NOW,
+        "frame_id": "map",
+        "x": 1.0,
+        "y": 2.0,
+        "theta": 0.5,
+        "covariance": [0.01, 0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.0, 0.002],
+        "mode": "tracking",
+        "map_to_odom": {"x": 0.1, "y": -0.2, "theta": 0.01},
+    },
 }
 
 

@@ -160,6 +160,27 @@ STREAMS: dict[str, StreamSpec] = {
             "the simulated robot's true pose and place class (for evaluation only)",
         ),
         StreamSpec(
+            "tf/map",
+            "foxglove.FrameTransform",
+            "agent → all",
+            Policy.DROP_OLDEST,
+            "map → odom transform: the localization's correction of the odometry",
+        ),
+        StreamSpec(
+            "localization/pose",
+            "loci.pose/1",
+            "agent → all",
+            Policy.DROP_OLDEST,
+            "the robot's pose in the map with its covariance",
+        ),
+        StreamSpec(
+            "localization/scene",
+            "foxglove.SceneUpdate",
+            "agent → all",
+            Policy.DROP_OLDEST,
+            "the particles, the estimate and its covariance ellipse for Foxglove's 3D panel",
+        ),
+        StreamSpec(
             "pose/truth",
             "foxglove.PoseInFrame",
             "log import → evaluation",

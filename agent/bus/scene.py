@@ -192,3 +192,73 @@ def people_scene(people: Mapping[str, Any], *, stamp: float | None = None) -> fg
         spheres=spheres,
     )
     return fg.SceneUpdate(entities=[entity])
+
+
+_PARTICLE_RGBA = (0.1, 0.35, 0.85, 0.8)
+_ESTIMATE_RGBA = (0.85, 0.1, 0.1, 1.0)
+
+
+def localization_scene(
+    particles: Any,
+    pose: tuple[float, float, float],
+    covariance: Any,
+    *,
+    stamp: float,
+    frame_id: str = "map",
+    max_particles: int = 2000,
+) -> fg.SceneUpdate:
+    """The particle filter as a SceneUpdate (entity ``localization``): each particle a short
+    line along its heading (at most ``max_particles``, evenly picked), the estimate an arrow,
+    its position covariance a 2σ ellipse (a line loop)."""
+    import numpy as np
+
+    P = np.asarray(particles, dtype=np.float64).reshape(-1, 3)
+    if P.shape[0] > max_particles:
+        P = P[np.linspace(0, P.shape[0] - 1, max_particles).round().astype(int)]
+    pts = []
+    for x, y, th in P:
+        pts.append(fg.Point3(x=float(x), y=float(y), z=0.05))
+        pts.append(fg.Point3(x=float(x + 0.25 * math.cos(th)), y=float(y + 0.25 * math.sin(th)), z=0.05))
+    lines = []
+    if pts:
+        lines.append(
+            fg.LinePrimitive(
+                type=fg.LinePrimitiveLineType.LineList,
+                pose=_pose(0.0, 0.0),
+                thickness=0.02,
+                points=pts,
+                color=_color(_PARTICLE_RGBA),
+            )
+        )
+    C = np.asarray(covariance, dtype=np.float64).reshape(3, 3)[:2, :2]
+    vals, vecs = np.linalg.eigh((C + C.T) / 2)
+    radii = 2.0 * np.sqrt(np.maximum(vals, 0.0))
+    ring = []
+    for a in np.linspace(0, 2 * math.pi, 37)[:-1]:
+        v = vecs @ (radii * np.array([math.cos(a), math.sin(a)]))
+        ring.append(fg.Point3(x=float(pose[0] + v[0]), y=float(pose[1] + v[1]), z=0.06))
+    lines.append(
+        fg.LinePrimitive(
+            type=fg.LinePrimitiveLineType.LineLoop,
+            pose=_pose(0.0, 0.0),
+            thickness=0.04,
+            points=ring,
+            color=_color(_ESTIMATE_RGBA),
+        )
+    )
+    yaw = float(pose[2])
+    arrow = fg.ArrowPrimitive(
+        pose=fg.Pose(
+            position=fg.Vector3(x=float(pose[0]), y=float(pose[1]), z=0.1),
+            orientation=fg.Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)),
+        ),
+        shaft_length=0.6,
+        shaft_diameter=0.06,
+        head_length=0.25,
+        head_diameter=0.18,
+        color=_color(_ESTIMATE_RGBA),
+    )
+    entity = fg.SceneEntity(
+        timestamp=_stamp(stamp), frame_id=frame_id, id="localization", lines=lines, arrows=[arrow]
+    )
+    return fg.SceneUpdate(entities=[entity])

@@ -579,3 +579,34 @@ TUTOR_STATE = MessageSchema(
 )
 for _schema in (TUTOR_CMD, TUTOR_STATE):
     SCHEMAS.register(_schema)
+
+# ---- localization ----------------------------------------------------------------------------
+
+LOCALIZED_POSE = MessageSchema(
+    "loci.pose",
+    1,
+    obj(
+        {
+            "stamp": _STAMP,
+            "frame_id": string(max_length=64, description="the map's frame ('map')"),
+            **_POSE,
+            "covariance": array(
+                number(),
+                min_items=9,
+                max_items=9,
+                description="3x3 row-major covariance of x, y, theta (m², rad²)",
+            ),
+        },
+        {
+            "mode": string(max_length=32, description="'global', 'tracking' or 'matching'"),
+            "share": number(
+                minimum=0, maximum=1, description="the estimate's cluster's share of the particles' weight"
+            ),
+            "particles": integer(minimum=0),
+            "map_to_odom": obj(_POSE, description="the map -> odom transform at this stamp"),
+        },
+    ),
+    description="the robot's pose in a known map with its covariance (loci localize, [localization])",
+)
+
+SCHEMAS.register(LOCALIZED_POSE)

@@ -76,6 +76,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="watch the tour live in the Foxglove app: the agent serves its layers on this WebSocket "
         "port (docs/foxglove.md)",
     )
+    p.add_argument(
+        "--odometry",
+        choices=("exact", "noisy"),
+        default="exact",
+        help="exact (default): the simulated odometry is the true pose; noisy: the base's odometry "
+        "drifts (drivers.sim.base.OdometryNoise) and the agent tracks its pose by scan matching",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON at the end")
     p.set_defaults(handler=cmd_demo)
 
@@ -92,6 +99,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         interactive=args.interactive,
         replay=not args.no_replay,
         foxglove=args.foxglove,
+        odometry=args.odometry,
     )
     import signal
 

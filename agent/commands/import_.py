@@ -142,6 +142,15 @@ def register(subparsers: Any) -> None:
         metavar="FRAME",
         help="the odometry frame of /tf odometry (default: the odometry's, else odom)",
     )
+    p.add_argument(
+        "--reference",
+        type=Path,
+        metavar="LOG",
+        help="a corrected copy of the log (a CARMEN log whose laser lines carry SLAM-corrected poses, "
+        "or a recording with pose/truth): its scans are matched to the imported ones by their ranges "
+        "and their poses written on pose/truth at the imported scans' stamps (the localization "
+        "evaluation's truth; docs/localization.md)",
+    )
     p.set_defaults(handler=_import)
 
 
@@ -175,8 +184,20 @@ def _import(args: argparse.Namespace) -> int:
             progress=progress,
             emit=emit,
         )
+    reference = None
+    if args.reference is not None:
+        from agent.recording.reference import add_reference
+
+        reference = add_reference(Path(args.output), args.reference, Path(args.output), overwrite=True)
     if args.json:
-        emit_json(result.as_dict())
+        emit_json(
+            result.as_dict()
+            | (
+                {"reference": {"matched": reference.matched, "scans": reference.reference_scans}}
+                if reference
+                else {}
+            )
+        )
     else:
         print(result.summary())
         for k, v in result.choices.items():
@@ -186,5 +207,7 @@ def _import(args: argparse.Namespace) -> int:
         beams = result.stats.beams
         if beams:
             print("  beams: " + ", ".join(f"{n:,} {k}" for k, n in sorted(beams.items())))
+        if reference is not None:
+            print(f"  {reference.summary()}")
         print(f"replay it with: loci replay {args.output}")
     return 0

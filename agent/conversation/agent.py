@@ -583,10 +583,25 @@ class DialogueAgent:
             "id": goal_id,
             "stamp": self.clock(),
             "frame_id": "odom",
-            "path": [{"x": round(x, 4), "y": round(y, 4)} for x, y in points],
+            "path": [
+                {"x": round(x, 4), "y": round(y, 4)} for x, y, _ in (self._to_odom(x, y) for x, y in points)
+            ],
         }
         content = {"target": target, "node": p.goal, "path": list(p.nodes), "distance": round(p.distance, 3)}
         return [self.say(intent, "go_to", "accepted", content), Outgoing("base/goal", goal_msg)]
+
+    def _to_odom(self, x: float, y: float, theta: float = 0.0) -> tuple[float, float, float]:
+        """A point of the map (the graph's, the tracks' frame) in the odometry frame the base
+        drives in: the same unless the pipeline tracks its pose (``[localization]``), whose
+        latest map -> odom correction is undone."""
+        tracker = getattr(self.world, "tracker", None)
+        c = getattr(tracker, "correction", None)
+        if c is None:
+            return x, y, theta
+        from knowledge.localization.se2 import compose, inverse
+
+        o = compose(inverse(c), [x, y, theta])
+        return float(o[0]), float(o[1]), float(o[2])
 
     async def _on_stop(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:
         stopped = sorted(
@@ -728,7 +743,7 @@ class DialogueAgent:
                 Outgoing("base/goal", {"schema": "loci.base_goal/1", "stamp": self.clock(), "cancel": True})
             )
         if step.goal is not None:
-            gx, gy, gth = (float(v) for v in step.goal)
+            gx, gy, gth = self._to_odom(*(float(v) for v in step.goal))
             goal = {"x": gx, "y": gy, "theta": gth}
             msg = {
                 "schema": "loci.base_goal/1",

@@ -4,7 +4,11 @@
 scan's stamp (:mod:`agent.core.odom_sync`) and runs, in this order:
 
 1. the laser's pose: the robot pose composed with the laser's mount (every position below,
-   graph nodes included, is the laser's, in the odometry frame);
+   graph nodes included, is the laser's, in the odometry frame); with ``localization``
+   (``[localization]``, off unless configured) that pose is corrected by matching the scan
+   against the map built so far (:class:`~knowledge.localization.tracking.PoseTracker`) and
+   everything below lives in the corrected ``map`` frame (:attr:`StepResult.correction` is
+   the map → odom transform);
 1a. people (``[people]``, on by default): the leg detector, leg pairing and tracking of
    :class:`~knowledge.people.pipeline.PeoplePipeline` on the scan as measured, tracks in the
    odometry frame (:attr:`StepResult.people`); with ``mask`` the beams of the legs of
@@ -55,6 +59,8 @@ import numpy as np
 
 from agent.tables import build_dataclass, dataclass_table
 from drivers.messages import LaserScan, Pose2D
+from knowledge.localization.scan_matching import MatchParams
+from knowledge.localization.tracking import PoseTracker, TrackingParams
 from knowledge.metric.local_map import LocalMap, LocalMapParams, beam_endpoints
 from knowledge.metric.rear_beams import FullScanParams, assemble_scan
 from knowledge.navigation.doorways import Doorway, DoorwayDetector, DoorwayParams, scan_points
@@ -143,6 +149,7 @@ class PipelineParams:
         graph: the navigation graph (node distance d, label window N, ...).
         doorways: the doorway detector.
         people: people detection and masking.
+        localization: pose tracking by scan matching (None: trust the odometry).
     """
 
     mount: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -151,6 +158,7 @@ class PipelineParams:
     graph: GraphParams = field(default_factory=GraphParams)
     doorways: DoorwayParams = field(default_factory=DoorwayParams)
     people: PeopleParams = field(default_factory=PeopleParams)
+    localization: TrackingParams | None = None
 
     def __post_init__(self) -> None:
         m = tuple(float(v) for v in self.mount)
@@ -167,11 +175,13 @@ class PipelineParams:
             graph=config.navigation,
             doorways=config.doorways,
             people=PeopleParams(enabled=config.people.enabled, mask=config.people.mask),
+            localization=config.localization.tracking_params(),
         )
 
     def to_table(self) -> dict[str, Any]:
         """Plain JSON-able values (stored in recordings so a replay uses the same parameters)."""
-        return {
+        extra = {} if self.localization is None else {"localization": dataclass_table(self.localization)}
+        return extra | {
             "mount": list(self.mount),
             "local_map": dataclass_table(self.local_map),
             "rear_beams": dataclass_table(self.rear_beams),
@@ -189,7 +199,7 @@ class PipelineParams:
         """
         from knowledge.errors import ConfigError
 
-        known = {"mount", "local_map", "rear_beams", "graph", "doorways", "people"}
+        known = {"mount", "local_map", "rear_beams", "graph", "doorways", "people", "localization"}
         unknown = sorted(set(table) - known)
         if unknown:
             raise ConfigError(f"pipeline parameters: unknown key {unknown[0]!r}")
@@ -203,6 +213,7 @@ class PipelineParams:
             graph=build_dataclass(GraphParams, table.get("graph", {}), "graph"),
             doorways=build_dataclass(DoorwayParams, table.get("doorways", {}), "doorways"),
             people=build_dataclass(PeopleParams, table.get("people", {"enabled": False}), "people"),
+            localization=_tracking_from(table["localization"]) if table.get("localization") else None,
         )
 
 
@@ -225,6 +236,8 @@ class StepResult:
         masked: ``(B,)`` bool, the scan's beams hidden as people (None: nothing hidden).
         coverage: the share of ``ranges``' beams measured or hit in the local map (the rest
             are interpolated); below the graph's ``min_coverage`` the label did not vote.
+        correction: ``(3,)`` the map → odom transform of pose tracking (None: tracking off;
+            ``pose`` is then in the odometry frame, else in ``map``).
     """
 
     scan: LaserScan
@@ -239,6 +252,7 @@ class StepResult:
     people: PeopleFrame | None = None
     masked: np.ndarray | None = None
     coverage: float = 1.0
+    correction: np.ndarray | None = None
 
     @property
     def stamp(self) -> float:
@@ -319,6 +333,8 @@ class Pipeline:
         self.scans = 0
         self.last_stamp: float | None = None
         self._angles: tuple[tuple[int, float, float], np.ndarray] | None = None
+        loc = self.params.localization
+        self.tracker: PoseTracker | None = PoseTracker(loc) if loc is not None else None
 
     # ------------------------------------------------------------------ per scan
     def _beam_angles(self, scan: LaserScan) -> np.ndarray:
@@ -340,6 +356,13 @@ class Pipeline:
             )
         sensor = compose(pose, self.params.mount)
         angles = self._beam_angles(scan)
+        correction = None
+        frame_id = pose.frame_id
+        if self.tracker is not None:
+            track = self.tracker.update(
+                scan.ranges, angles, sensor, range_max=scan.range_max, range_min=scan.range_min
+            )
+            sensor, correction, frame_id = track.pose, track.correction, "map"
         fsp = self.params.rear_beams
         full = is_full_turn(scan)
         frame: PeopleFrame | None = None
@@ -421,7 +444,7 @@ class Pipeline:
         return StepResult(
             scan=scan,
             pose=Pose2D(
-                float(sensor[0]), float(sensor[1]), float(sensor[2]), stamp=scan.stamp, frame_id=pose.frame_id
+                float(sensor[0]), float(sensor[1]), float(sensor[2]), stamp=scan.stamp, frame_id=frame_id
             ),
             ranges=ranges,
             label=label,
@@ -433,6 +456,7 @@ class Pipeline:
             people=frame,
             masked=mask,
             coverage=coverage,
+            correction=correction,
         )
 
     # ------------------------------------------------------------------ documents
@@ -471,7 +495,9 @@ class Pipeline:
         """The ``loci.graph/1`` and ``loci.areas/1`` messages of the current state."""
         doc = self.state_document()
         when = stamp if stamp is not None else (self.last_stamp or 0.0)
-        return graph_message(doc, when), areas_message(doc, when)
+        return graph_message(doc, when, "map" if self.tracker is not None else "odom"), areas_message(
+            doc, when
+        )
 
     @staticmethod
     def warm_up(
@@ -487,6 +513,12 @@ class Pipeline:
             ranges = np.minimum(4.0 / np.maximum(np.abs(np.cos(a)), 0.2), 10.0).astype(np.float32)
             scan = LaserScan(float(i), i, "laser", angle_min, inc, 30.0, ranges)
             p.process(scan, Pose2D(0.1 * i, 0.0, 0.0, stamp=float(i)))
+
+
+def _tracking_from(table: Mapping[str, Any]) -> TrackingParams:
+    t = dict(table)
+    match = build_dataclass(MatchParams, t.pop("match", {}), "localization.match")
+    return replace(build_dataclass(TrackingParams, t, "localization", skip=("match",)), match=match)
 
 
 # ---------------------------------------------------------------------------- messages

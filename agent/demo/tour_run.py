@@ -52,6 +52,10 @@ class DemoOptions:
     speed: float = 1.5
     interactive: bool = False
     replay: bool = True
+    #: "exact" (the simulator's odometry is the true pose) or "noisy" (the base's default
+    #: odometry noise, drivers.sim.base.OdometryNoise, and the agent tracks its pose by scan
+    #: matching: [localization] tracking; docs/localization.md)
+    odometry: str = "exact"
     timeouts: TourTimeouts = field(default_factory=TourTimeouts)
     startup_timeout: float = 120.0
     #: ``[HOST:]PORT`` of the agent's Foxglove live view (None: none)
@@ -104,7 +108,9 @@ def teach_objects(folder: Path, tour: Any) -> list[str]:
     return db.names()
 
 
-def write_agent_config(path: Path, *, robot: str, port: int, lms: Path, folder: Path) -> Path:
+def write_agent_config(
+    path: Path, *, robot: str, port: int, lms: Path, folder: Path, tracking: bool = False
+) -> Path:
     """The agent's TOML for the demo (paths relative to the folder)."""
     text = f"""# written by loci demo
 [robot]
@@ -136,6 +142,8 @@ database = "objects"
 # allow for both before giving up
 lost_after = 12.0
 """
+    if tracking:
+        text += "\n[localization]\n# the odometry drifts: correct it by matching each scan against the map\ntracking = true\n"
     atomic_write_text(path, text)
     return path
 
@@ -182,13 +190,20 @@ def run_demo(opts: DemoOptions, screen: Screen | None = None) -> dict[str, Any]:
             [
                 "sim", "robot", "--world", f"demo:{opts.seed}", "--tutor", "--camera",
                 "--camera-rate", "4", "--robot", ROBOT, "--listen", f"tcp/127.0.0.1:{ps}",
-                "--connect", f"tcp/127.0.0.1:{pa}", "--link", str(link), "--speed", f"{opts.speed:g}", "--exact-odometry",
-                "--seed", str(opts.seed),
+                "--connect", f"tcp/127.0.0.1:{pa}", "--link", str(link), "--speed", f"{opts.speed:g}",
+                *(["--exact-odometry"] if opts.odometry == "exact" else []), "--seed", str(opts.seed),
             ],
         )  # fmt: skip
         if not wait_for_path(link, 30.0, children):
             raise _failed(children, "the simulated robot's LMS did not appear")
-        config = write_agent_config(folder / "agent.toml", robot=ROBOT, port=pa, lms=link, folder=folder)
+        config = write_agent_config(
+            folder / "agent.toml",
+            robot=ROBOT,
+            port=pa,
+            lms=link,
+            folder=folder,
+            tracking=opts.odometry == "noisy",
+        )
         live = ["--foxglove", opts.foxglove] if opts.foxglove else []
         children.start("agent", ["run", "--config", str(config), *live])
         if opts.foxglove:

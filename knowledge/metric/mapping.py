@@ -178,6 +178,33 @@ class ScanMapper:
         other.scans = self.scans
         return other
 
+    def window(
+        self, xmin: float, ymin: float, xmax: float, ymax: float
+    ) -> tuple[np.ndarray, np.ndarray, tuple[float, float]]:
+        """The occupied and free cells of a box of the map, for scan matching against it.
+
+        Returns:
+            ``(rows, cols)`` bool occupied and free masks in *map orientation* (row 0 at the
+            bottom: row = y index), and the world ``(x, y)`` of the lower-left corner of cell
+            ``(0, 0)``. The box is snapped to the grid's cells; parts outside the grid are
+            unknown (neither occupied nor free).
+        """
+        res = self.params.resolution
+        ox, oy = self._origin
+        c0, r0 = math.floor((xmin - ox) / res), math.floor((ymin - oy) / res)
+        c1, r1 = math.ceil((xmax - ox) / res), math.ceil((ymax - oy) / res)
+        rows, cols = max(r1 - r0, 1), max(c1 - c0, 1)
+        hits = np.zeros((rows, cols), dtype=np.int32)
+        misses = np.zeros((rows, cols), dtype=np.int32)
+        R, C = self._hits.shape
+        a0, a1, b0, b1 = max(r0, 0), min(r1, R), max(c0, 0), min(c1, C)
+        if a0 < a1 and b0 < b1:
+            hits[a0 - r0 : a1 - r0, b0 - c0 : b1 - c0] = self._hits[a0:a1, b0:b1]
+            misses[a0 - r0 : a1 - r0, b0 - c0 : b1 - c0] = self._misses[a0:a1, b0:b1]
+        seen = hits + misses
+        occupied = (hits > 0) & (hits >= self.params.occupied * seen)
+        return occupied, (seen > 0) & ~occupied, (ox + c0 * res, oy + r0 * res)
+
     def grid(self, name: str = "scans") -> OccupancyGrid:
         """The map so far (image orientation, origin at its lower-left corner)."""
         hits, misses = self._hits, self._misses

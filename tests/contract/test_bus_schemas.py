@@ -166,7 +166,8 @@ def _example(spec: Spec, draw: st.DrawFn, depth: int = 0) -> Any:
         return draw(st.booleans())
     if k == "array":
         assert spec.items is not None
-        n = draw(st.integers(spec.min_items or 0, min(spec.max_items or 3, 3)))
+        lo = spec.min_items or 0
+        n = draw(st.integers(lo, max(lo, min(spec.max_items or 3, 3))))
         return [_example(spec.items, draw, depth + 1) for _ in range(n)]
     if k == "object" and spec.values is not None:
         return {

@@ -160,3 +160,16 @@ def test_interactive_mode_takes_the_tutors_lines_from_the_console(tmp_path: Path
     said = [x["text"] for x in lines if x.get("speaker") == "robot"]
     assert any(t.startswith("I am in ") for t in said), said  # "Where are you?" was answered
     assert (out / "map.png").is_file() and (out / "tour.mcap").is_file()
+
+
+def test_the_noisy_odometry_tour_turns_tracking_on(tmp_path: Path) -> None:
+    lms = tmp_path / "lms"
+    plain = load_config(
+        write_agent_config(tmp_path / "a.toml", robot="tour", port=7999, lms=lms, folder=tmp_path)
+    )
+    noisy = load_config(
+        write_agent_config(
+            tmp_path / "b.toml", robot="tour", port=7999, lms=lms, folder=tmp_path, tracking=True
+        )
+    )
+    assert not plain.localization.tracking and noisy.localization.tracking

@@ -343,3 +343,31 @@ def test_follow_me_follows_the_pipelines_people_and_is_refused_without_them() ->
     # ...then no new goal while nobody is seen
     quiet = agent.on_scan(types.SimpleNamespace(stamp=clock() + 0.3), (0.0, 0.0, 0.0), None)
     assert all(o.stream != "base/goal" for o in quiet)
+
+
+@dataclass
+class _Tracker:
+    correction: Any
+
+
+@dataclass
+class TrackedWorld(World):
+    tracker: _Tracker | None = None
+
+
+def test_goals_go_to_the_base_in_the_odometry_frame_when_the_pipeline_tracks_its_pose() -> None:
+    world, corridor, _, room = office()
+    # the map is the odometry frame moved 1 m along x and turned a quarter turn: map = C ⊕ odom
+    tracked = TrackedWorld(world.graph, world.areas, _Tracker(np.array([1.0, 0.0, math.pi / 2])))
+    agent, _ = agent_for(tracked)  # type: ignore[arg-type]
+    world.graph.current = corridor[0]
+    handle(agent, intent("assert_object", object="charging station"))
+    world.graph.current = room[3]
+    reply, rest = handle(agent, intent("go_to", target={"head": "charging station", "determiner": "the"}))
+    (goal,) = [o.message for o in rest if o.stream == "base/goal"]
+    plan_nodes = reply["content"]["path"]  # no pose yet: the start node is a waypoint too
+    for p, k in zip(goal["path"], plan_nodes, strict=True):
+        mx, my = world.graph.node(k).xy
+        # odom = C⁻¹ ⊕ map: (mx - 1, my) turned back a quarter turn
+        assert (p["x"], p["y"]) == pytest.approx((my, -(mx - 1.0)), abs=1e-3)
+    assert goal["frame_id"] == "odom"

@@ -1,0 +1,403 @@
+"""Monte Carlo localization in a known occupancy map, with the place classifier as an extra
+observation (book Sect. 6.3, eq. 6.3).
+
+The belief over the laser's pose is a set of weighted particles (``(N, 3)`` poses in the
+map frame of a :class:`~knowledge.localization.likelihood.LikelihoodField`). Each
+:meth:`ParticleFilter.update` with the laser's odometry pose and its scan:
+
+1. **motion**: every particle moves by the odometry increment since the last update, with
+   sampled noise (:func:`~knowledge.localization.motion.sample_motion`);
+2. once the robot has moved ``update_distance`` or turned ``update_angle`` since the last
+   measurement (as AMCL does: a robot standing still would count the same scan again and
+   again), **weighting** by the terms of eq. 6.3, in logarithms:
+
+   * ``Pr(z_t | m, x_t)``, the laser: the likelihood field model over ``beams`` beams —
+     each endpoint ``d`` metres from the nearest obstacle has ``z_hit·exp(−d²/2σ²) +
+     z_rand/max_range`` (outside the map: ``d`` = the field's clipping distance); the sum of
+     the beams' logarithms is multiplied by ``beam_weight`` (< 1: neighbouring beams are not
+     independent, and a filter that believes they are becomes overconfident);
+   * ``Pr(x_t | m)``: a particle on an occupied or unknown cell gets ``log(off_map)``, one
+     outside the map is dropped (weight 0) — "we weight the particles inversely
+     proportional to the occupancy probability at x_t in m";
+   * the semantic term ``Pr(z_t | y_t)`` (:class:`~knowledge.localization.semantic.SemanticMap`)
+     when a semantic map and the scan's class histogram are given, times ``semantic_weight``;
+
+   each term can be switched off (``laser=False`` is the book's experiment: odometry, map
+   and place labels only);
+3. **resampling** (low-variance, Thrun et al. Table 4.4) when the effective sample size
+   ``1/Σw²`` falls below ``resample_threshold·N`` (adaptive resampling); with
+   ``initial_particles`` more than ``particles`` (a wide uniform start), the first resampling
+   draws down to ``particles``;
+4. **recovery** (augmented MCL, Table 8.3): short- and long-term averages of the per-beam
+   likelihood (``alpha_fast``, ``alpha_slow``); when the short one falls below the long one
+   (the scans stopped fitting: the robot was carried away), a share ``1 − w_fast/w_slow``
+   of the resampled particles is drawn anew, uniformly over the free cells. This is what
+   finds a kidnapped robot again.
+
+:meth:`ParticleFilter.estimate` gives the pose (weighted mean of the heaviest cluster:
+particles within ``cluster_radius`` of the heaviest 0.5 m cell), its covariance and the
+cluster's share of the weight. Global localization starts from :meth:`init_uniform`, pose
+tracking from :meth:`init_pose`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numba
+import numpy as np
+import numpy.typing as npt
+
+from knowledge.localization.likelihood import LikelihoodField
+from knowledge.localization.motion import MotionNoise, sample_motion
+from knowledge.localization.se2 import between, wrap
+from knowledge.localization.semantic import SemanticMap
+
+__all__ = ["Estimate", "MclParams", "ParticleFilter", "beam_log_likelihood"]
+
+
+@dataclass(frozen=True)
+class MclParams:
+    """The particle filter's parameters (see the module docstring).
+
+    Attributes:
+        particles: particles after the first resampling (and for :meth:`ParticleFilter.init_pose`).
+        initial_particles: particles of :meth:`ParticleFilter.init_uniform` (0: ``particles``).
+        beams: beams used per scan (evenly spread over the scan's valid beams).
+        max_range: metres; longer beams and no-returns are not used.
+        sigma_hit: metres, the likelihood field's spread.
+        z_hit, z_rand: the field model's mixture weights.
+        beam_weight: the factor on the beams' summed log-likelihood.
+        off_map: the weight factor of a particle on an occupied or unknown cell.
+        laser: use the laser term.
+        semantic_weight: the factor on the semantic term's log-likelihood (0: off).
+        update_distance, update_angle: metres, radians of motion between measurement updates.
+        resample_threshold: resample when the effective sample size is below this share of N.
+        alpha_slow, alpha_fast: the averaging rates of augmented MCL (``alpha_fast`` 0: no
+            random particles).
+        motion: the motion model's noise.
+        cluster_radius: metres, the estimate's cluster around the heaviest cell.
+    """
+
+    particles: int = 10_000
+    initial_particles: int = 0
+    beams: int = 60
+    max_range: float = 20.0
+    sigma_hit: float = 0.2
+    z_hit: float = 0.9
+    z_rand: float = 0.1
+    beam_weight: float = 0.2
+    off_map: float = 1e-3
+    laser: bool = True
+    semantic_weight: float = 1.0
+    update_distance: float = 0.2
+    update_angle: float = 0.2
+    resample_threshold: float = 0.5
+    alpha_slow: float = 0.001
+    alpha_fast: float = 0.1
+    motion: MotionNoise = field(default_factory=MotionNoise)
+    cluster_radius: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.particles < 1 or self.initial_particles < 0 or self.beams < 1:
+            raise ValueError("particles and beams must be >= 1, initial_particles >= 0")
+        for name in ("max_range", "sigma_hit", "cluster_radius"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"MclParams.{name} must be a positive number, got {v!r}")
+        if not (0 < self.off_map <= 1) or not (0 <= self.resample_threshold <= 1):
+            raise ValueError("off_map must be in (0, 1] and resample_threshold in [0, 1]")
+        if (
+            min(self.z_hit, self.z_rand, self.beam_weight, self.semantic_weight) < 0
+            or self.z_hit + self.z_rand <= 0
+        ):
+            raise ValueError("z_hit, z_rand, beam_weight and semantic_weight must be >= 0")
+        if not (0 <= self.alpha_slow <= 1 and 0 <= self.alpha_fast <= 1):
+            raise ValueError("alpha_slow and alpha_fast must be in [0, 1]")
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """The filter's answer.
+
+    Attributes:
+        pose: ``(3,)`` the laser's pose in the world frame (the map's).
+        covariance: ``(3, 3)`` of the cluster's particles (x, y, theta).
+        share: the cluster's share of the total weight (1: one hypothesis).
+        spread: metres, RMS distance of all particles from ``pose``.
+    """
+
+    pose: np.ndarray
+    covariance: np.ndarray
+    share: float
+    spread: float
+
+
+@numba.njit(cache=True, nogil=True)
+def beam_log_likelihood(
+    particles: np.ndarray, bx: np.ndarray, by: np.ndarray, logp: np.ndarray, res: float, outside: float
+) -> np.ndarray:
+    """``(N,)`` the summed ``logp`` of each particle's beam endpoints.
+
+    ``particles``: ``(N, 3)`` map-frame poses; ``bx, by``: ``(M,)`` endpoints in the laser's
+    frame; ``logp``: ``(rows, cols)`` per-cell log-likelihood (map orientation); endpoints
+    outside the grid count ``outside``."""
+    rows, cols = logp.shape
+    n = particles.shape[0]
+    m = bx.shape[0]
+    out = np.empty(n)
+    inv = 1.0 / res
+    for i in range(n):
+        x, y, th = particles[i, 0], particles[i, 1], particles[i, 2]
+        c, s = math.cos(th), math.sin(th)
+        tot = 0.0
+        for k in range(m):
+            ex = x + c * bx[k] - s * by[k]
+            ey = y + s * bx[k] + c * by[k]
+            col = math.floor(ex * inv)
+            row = math.floor(ey * inv)
+            if 0 <= row < rows and 0 <= col < cols:
+                tot += logp[row, col]
+            else:
+                tot += outside
+        out[i] = tot
+    return out
+
+
+class ParticleFilter:
+    """Monte Carlo localization (see the module docstring).
+
+    Args:
+        field: the map's likelihood field.
+        params: the parameters.
+        semantic: the labelled map (same cells as ``field``) for the semantic term.
+        rng: the random generator (seeded for reproducible runs).
+    """
+
+    def __init__(
+        self,
+        field: LikelihoodField,
+        params: MclParams | None = None,
+        *,
+        semantic: SemanticMap | None = None,
+        rng: np.random.Generator | None = None,
+    ) -> None:
+        self.field = field
+        self.params = prm = params or MclParams()
+        if semantic is not None and semantic.labels.shape != field.shape:
+            raise ValueError(
+                f"the semantic map's cells {semantic.labels.shape} are not the map's {field.shape}"
+            )
+        self.semantic = semantic
+        self.rng = rng or np.random.default_rng()
+        d = field.distance.astype(np.float64)
+        z_rand = prm.z_rand / prm.max_range
+        # float32: half the memory traffic of the lookups, which is what the weighting waits on
+        self._logp = np.log(prm.z_hit * np.exp(-0.5 * (d / prm.sigma_hit) ** 2) + z_rand).astype(np.float32)
+        self._outside = math.log(
+            prm.z_hit * math.exp(-0.5 * (field.max_distance / prm.sigma_hit) ** 2) + z_rand
+        )
+        self._free_xy = field.free_positions()
+        if self._free_xy.shape[0] == 0:
+            raise ValueError("the map has no free cells to localize in")
+        self.particles = np.zeros((0, 3))
+        self.weights = np.zeros(0)
+        self._odom: np.ndarray | None = None
+        self._last_update: np.ndarray | None = None
+        self._w_slow = 0.0
+        self._w_fast = 0.0
+        self._first_resample = True
+        self.updates = 0
+        self.resamples = 0
+        self.injected = 0
+
+    # ------------------------------------------------------------------ initialisation
+    def _uniform(self, n: int) -> np.ndarray:
+        res = self.field.resolution
+        k = self.rng.integers(0, self._free_xy.shape[0], n)
+        xy = self._free_xy[k] + self.rng.uniform(-0.5 * res, 0.5 * res, (n, 2))
+        th = self.rng.uniform(-math.pi, math.pi, n)
+        return np.column_stack([xy, th])
+
+    def init_uniform(self) -> None:
+        """Global localization: particles uniform over the free cells, any heading."""
+        prm = self.params
+        n = prm.initial_particles or prm.particles
+        self.particles = self._uniform(n)
+        self.weights = np.full(n, 1.0 / n)
+        self._first_resample = n != prm.particles
+        self._reset()
+
+    def init_pose(self, pose: npt.ArrayLike, std: tuple[float, float, float] = (0.1, 0.1, 0.05)) -> None:
+        """Pose tracking: particles Gaussian around the world ``pose`` (stds: m, m, rad)."""
+        n = self.params.particles
+        p = self.field.to_map(np.asarray(pose, dtype=np.float64))
+        self.particles = np.column_stack([self.rng.normal(p[i], std[i], n) for i in range(3)])
+        self.particles[:, 2] = wrap(self.particles[:, 2])
+        self.weights = np.full(n, 1.0 / n)
+        self._first_resample = False
+        self._reset()
+
+    def _reset(self) -> None:
+        self._odom = None
+        self._last_update = None
+        self._w_slow = self._w_fast = 0.0
+
+    # ------------------------------------------------------------------ the filter
+    def update(
+        self,
+        odom: npt.ArrayLike,
+        ranges: npt.ArrayLike,
+        angles: npt.ArrayLike,
+        *,
+        range_max: float,
+        range_min: float = 0.0,
+        proba: npt.ArrayLike | None = None,
+    ) -> bool:
+        """One step with the laser's odometry pose and its scan (``proba``: the classifier's
+        histogram over the semantic map's classes). Returns whether the particles were
+        weighted (the robot had moved enough)."""
+        if self.particles.shape[0] == 0:
+            raise ValueError("initialise the filter first (init_uniform or init_pose)")
+        o = np.asarray(odom, dtype=np.float64)
+        if self._odom is None:
+            self._odom = o
+            self._last_update = o
+        else:
+            self.particles = sample_motion(self.particles, self._odom, o, self.params.motion, self.rng)
+            self._odom = o
+        assert self._last_update is not None
+        moved = between(self._last_update, o)
+        prm = self.params
+        if (
+            self.updates
+            and math.hypot(moved[0], moved[1]) < prm.update_distance
+            and abs(moved[2]) < prm.update_angle
+        ):
+            return False
+        self._last_update = o
+        self._weigh(ranges, angles, range_max, range_min, proba)
+        self.updates += 1
+        return True
+
+    def _endpoints(
+        self, ranges: npt.ArrayLike, angles: npt.ArrayLike, range_max: float, range_min: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        r = np.asarray(ranges, dtype=np.float64)
+        a = np.asarray(angles, dtype=np.float64)
+        with np.errstate(invalid="ignore"):
+            ok = (
+                np.isfinite(r)
+                & (r > max(range_min, 0.0))
+                & (r < range_max * (1 - 1e-6))
+                & (r <= self.params.max_range)
+            )
+        idx = np.nonzero(ok)[0]
+        if idx.size > self.params.beams:
+            idx = idx[np.linspace(0, idx.size - 1, self.params.beams).round().astype(np.int64)]
+        return r[idx] * np.cos(a[idx]), r[idx] * np.sin(a[idx])
+
+    def _weigh(
+        self,
+        ranges: npt.ArrayLike,
+        angles: npt.ArrayLike,
+        range_max: float,
+        range_min: float,
+        proba: npt.ArrayLike | None,
+    ) -> None:
+        prm = self.params
+        P = self.particles
+        res = self.field.resolution
+        rows_n, cols_n = self.field.shape
+        col = np.floor(P[:, 0] / res).astype(np.int64)
+        row = np.floor(P[:, 1] / res).astype(np.int64)
+        inside = (row >= 0) & (row < rows_n) & (col >= 0) & (col < cols_n)
+        logw = np.zeros(P.shape[0])
+        free = np.zeros(P.shape[0], dtype=bool)
+        free[inside] = self.field.free[row[inside], col[inside]]
+        logw[~free] += math.log(prm.off_map)
+        logw[~inside] = -np.inf
+        fit = None
+        if prm.laser:
+            bx, by = self._endpoints(ranges, angles, range_max, range_min)
+            if bx.size:
+                ll = beam_log_likelihood(np.ascontiguousarray(P), bx, by, self._logp, res, self._outside)
+                logw += prm.beam_weight * ll
+                fit = np.exp(ll / bx.size)  # per-beam likelihood, for recovery
+        if self.semantic is not None and proba is not None and prm.semantic_weight > 0:
+            z = int(np.argmax(np.asarray(proba)))
+            logw += prm.semantic_weight * self.semantic.log_likelihood(row, col, z)
+        self._apply(logw, fit)
+
+    def _apply(self, logw: np.ndarray, fit: np.ndarray | None) -> None:
+        prm = self.params
+        lw = np.log(np.maximum(self.weights, 1e-300)) + logw
+        top = np.max(lw)
+        if not np.isfinite(top):  # every particle left the map: start again
+            self.init_uniform()
+            return
+        w = np.exp(lw - top)
+        w /= w.sum()
+        self.weights = w
+        if fit is not None and prm.alpha_fast > 0:
+            alive = np.isfinite(logw)
+            w_avg = float(np.mean(fit[alive])) if alive.any() else 0.0
+            self._w_slow = (
+                w_avg if self._w_slow == 0 else self._w_slow + prm.alpha_slow * (w_avg - self._w_slow)
+            )
+            self._w_fast = (
+                w_avg if self._w_fast == 0 else self._w_fast + prm.alpha_fast * (w_avg - self._w_fast)
+            )
+        neff = 1.0 / float(np.sum(w * w))
+        if neff < prm.resample_threshold * w.size or self._first_resample:
+            self._resample()
+
+    def _resample(self) -> None:
+        prm = self.params
+        n = prm.particles
+        w = self.weights
+        # low-variance sampling
+        positions = (self.rng.uniform() + np.arange(n)) / n
+        cum = np.cumsum(w)
+        cum[-1] = 1.0
+        idx = np.searchsorted(cum, positions)
+        P = self.particles[idx]
+        inject = 0
+        if prm.alpha_fast > 0 and self._w_slow > 0:
+            share = max(0.0, 1.0 - self._w_fast / self._w_slow)
+            inject = int(self.rng.binomial(n, min(share, 1.0))) if share > 0 else 0
+        if inject:
+            P[self.rng.choice(n, inject, replace=False)] = self._uniform(inject)
+            self.injected += inject
+        self.particles = P
+        self.weights = np.full(n, 1.0 / n)
+        self._first_resample = False
+        self.resamples += 1
+
+    # ------------------------------------------------------------------ answers
+    def estimate(self) -> Estimate:
+        """The pose of the heaviest cluster (see the module docstring), in the world frame."""
+        P, w = self.particles, self.weights
+        cell = 0.5
+        key = np.floor(P[:, :2] / cell).astype(np.int64)
+        k = key[:, 0] * 1_000_003 + key[:, 1]
+        uniq, inv = np.unique(k, return_inverse=True)
+        mass = np.bincount(inv, weights=w, minlength=uniq.size)
+        best = int(np.argmax(mass))
+        sel = inv == best
+        centre = np.average(P[sel, :2], axis=0, weights=w[sel] + 1e-300)
+        near = np.hypot(P[:, 0] - centre[0], P[:, 1] - centre[1]) <= self.params.cluster_radius
+        wn = w[near] + 1e-300
+        Pn = P[near]
+        mx, my = np.average(Pn[:, 0], weights=wn), np.average(Pn[:, 1], weights=wn)
+        th = math.atan2(float(np.sum(wn * np.sin(Pn[:, 2]))), float(np.sum(wn * np.cos(Pn[:, 2]))))
+        d = np.column_stack([Pn[:, 0] - mx, Pn[:, 1] - my, wrap(Pn[:, 2] - th)])
+        cov = (d * (wn / wn.sum())[:, None]).T @ d
+        pose = self.field.to_world(np.array([mx, my, th]))
+        spread = float(np.sqrt(np.sum(w * ((P[:, 0] - mx) ** 2 + (P[:, 1] - my) ** 2))))
+        return Estimate(pose, cov, float(w[near].sum()), spread)
+
+    def world_particles(self) -> np.ndarray:
+        """``(N, 3)`` the particles in the world frame."""
+        return self.field.to_world(self.particles)

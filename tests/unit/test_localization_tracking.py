@@ -1,0 +1,110 @@
+"""Scan matching and pose tracking on simulated scans in a small test world."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from support.localization_world import ANGLES, RANGE_MAX, drifting_odometry, path, scans, world
+
+from knowledge.localization.likelihood import LikelihoodField, distance_field, surface
+from knowledge.localization.scan_matching import MatchParams, ScanMatcher, scan_points
+from knowledge.localization.se2 import compose, wrap
+from knowledge.localization.tracking import PoseTracker
+from knowledge.localization.trajectory import ate
+
+
+@pytest.fixture(scope="module")
+def setting() -> tuple:
+    g = world()
+    truth = path()
+    return g, truth, scans(g, truth), drifting_odometry(truth)
+
+
+def test_surface_leaves_out_the_inside_of_solid_blocks() -> None:
+    occ = np.zeros((7, 7), dtype=bool)
+    occ[1:6, 1:6] = True
+    s = surface(occ)
+    assert s[1, 1] and s[1, 3] and s[5, 5] and not s[3, 3] and not s[2:5, 2:5].any()
+
+
+def test_distance_field_by_hand() -> None:
+    occ = np.zeros((5, 7), dtype=bool)
+    occ[2, 3] = True
+    d = distance_field(occ, 0.1, 0.25)
+    assert d[2, 3] == 0.0
+    assert d[2, 5] == pytest.approx(0.2, abs=1e-4)
+    assert d[0, 0] == pytest.approx(0.25)  # clipped (0.36 m)
+    assert distance_field(np.zeros((2, 2), dtype=bool), 0.1, 1.0).min() == 1.0
+
+
+@pytest.mark.parametrize("offset", [(0.0, 0.0, 0.0), (0.15, -0.1, 0.08), (-0.25, 0.2, -0.3)])
+def test_matcher_finds_the_pose_from_an_offset_prior(setting: tuple, offset: tuple) -> None:
+    g, truth, R, _ = setting
+    lf = LikelihoodField.from_grid(g, 1.0)
+    matcher = ScanMatcher(MatchParams(angular_window=0.4))
+    mf = matcher.field(lf)
+    for i in (5, 60, 100):
+        pts = scan_points(R[i], ANGLES, range_max=RANGE_MAX)
+        res = matcher.match(mf, pts, lf.to_map(truth[i] + np.array(offset)))
+        got = lf.to_world(res.pose)
+        # 5 cm cells: along a corridor the end walls (seen at grazing angles) pin it to a cell
+        assert np.hypot(*(got[:2] - truth[i][:2])) < 0.05
+        assert abs(wrap(got[2] - truth[i][2])) < 0.01
+        assert res.fit > 0.8
+
+
+def test_search_runs_when_asked_or_when_the_fit_is_poor(setting: tuple) -> None:
+    g, truth, R, _ = setting
+    lf = LikelihoodField.from_grid(g, 1.0)
+    pts = scan_points(R[60], ANGLES, range_max=RANGE_MAX)
+    good = lf.to_map(truth[60])
+    auto = ScanMatcher(MatchParams(search="auto"))
+    assert not auto.match(auto.field(lf), pts, good).searched
+    always = ScanMatcher(MatchParams(search="always"))
+    assert always.match(always.field(lf), pts, good).searched
+    # turned 0.9 rad away, beyond the refinement's basin: the fit is poor, the search runs
+    far = lf.to_map(truth[60] + np.array([0.0, 0.0, 0.9]))
+    never = ScanMatcher(MatchParams(search="never"))
+    stuck = never.match(never.field(lf), pts, far)
+    assert stuck.fit < auto.params.min_fit and not stuck.searched
+    assert auto.match(auto.field(lf), pts, far).searched
+
+
+def test_tracking_without_a_map_beats_drifting_odometry(setting: tuple) -> None:
+    _, truth, R, odo = setting
+    tracker = PoseTracker()
+    est = np.array([tracker.update(R[i], ANGLES, odo[i], range_max=RANGE_MAX).pose for i in range(len(odo))])
+    odo_ate = ate(truth, odo)[0].rmse
+    track_ate = ate(truth, est)[0].rmse
+    assert odo_ate > 0.2
+    assert track_ate < 0.05
+    # the correction is map -> odom: applied to the odometry it gives the tracked pose
+    step = tracker.update(R[-1], ANGLES, odo[-1], range_max=RANGE_MAX)
+    assert np.allclose(compose(step.correction, odo[-1]), step.pose)
+    assert not step.integrated  # the robot has not moved since the last scan
+    assert 10 < tracker.mapper.scans < len(odo)  # scans are integrated only after motion
+
+
+def test_tracking_in_a_known_map_starting_from_the_true_pose(setting: tuple) -> None:
+    g, truth, R, odo = setting
+    tracker = PoseTracker(prior=g, initial=truth[0])
+    est = np.array([tracker.update(R[i], ANGLES, odo[i], range_max=RANGE_MAX).pose for i in range(len(odo))])
+    err = np.hypot(*(est[:, :2] - truth[:, :2]).T)
+    assert err.max() < 0.05
+    assert tracker.mapper.scans == 0  # a known map is not added to
+
+
+def test_a_match_never_ends_further_than_the_window_from_its_prior(setting: tuple) -> None:
+    g, truth, R, _ = setting
+    lf = LikelihoodField.from_grid(g, 1.0)
+    matcher = ScanMatcher()
+    mf = matcher.field(lf)
+    prm = matcher.params
+    pts = scan_points(R[5], ANGLES, range_max=RANGE_MAX)
+    for dx in (0.2, 0.8, 1.5):  # along the corridor: the refinement would slide back to the truth
+        prior = lf.to_map(truth[5] + np.array([dx, 0.0, 0.0]))
+        res = matcher.match(mf, pts, prior)
+        moved = float(np.hypot(*(res.pose[:2] - prior[:2])))
+        assert moved <= prm.linear_window + max(prm.sigmas) + 1e-9
+        if dx < prm.linear_window:
+            assert np.hypot(*(lf.to_world(res.pose)[:2] - truth[5][:2])) < 0.05  # within reach: found

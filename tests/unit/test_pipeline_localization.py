@@ -1,0 +1,65 @@
+"""``[localization]`` in the pipeline: the tracker corrects the odometry before the graph
+and the local map see the pose; configuration and recorded parameters carry it."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from support.localization_world import ANGLES, RANGE_MAX, drifting_odometry, path, scans, world
+
+from agent.config import load_config
+from agent.core.pipeline import Pipeline, PipelineParams, graph_message
+from drivers.messages import LaserScan, Pose2D
+from knowledge.errors import ConfigError
+from knowledge.localization.se2 import compose
+from knowledge.localization.tracking import TrackingParams
+from knowledge.localization.trajectory import ate
+from knowledge.places.model import PlaceModel, default_model_path
+
+
+def test_the_configuration_turns_tracking_on_and_recordings_keep_it() -> None:
+    assert load_config(table={}, env={}).localization.tracking is False
+    assert PipelineParams.from_config(load_config(table={}, env={})).localization is None
+    cfg = load_config(table={"localization": {"tracking": True, "beam_step": 3}}, env={})
+    params = PipelineParams.from_config(cfg)
+    assert params.localization == TrackingParams(beam_step=3)
+    assert PipelineParams.from_table(params.to_table()) == params
+    with pytest.raises(ConfigError, match="unknown key 'trackin'"):
+        load_config(table={"localization": {"trackin": True}}, env={})
+
+
+def test_tracking_in_the_pipeline_corrects_drifting_odometry() -> None:
+    g = world()
+    truth = path(0.1)
+    R = scans(g, truth)
+    odo = compose(truth[0], drifting_odometry(truth, drift=0.03, scale=1.04))  # starts at the true pose
+    model = PlaceModel.load(default_model_path())
+    on = Pipeline(model, PipelineParams(localization=TrackingParams(), people=_no_people()))
+    off = Pipeline(model, PipelineParams(people=_no_people()))
+    got_on, got_off = [], []
+    for i in range(len(truth)):
+        scan = LaserScan(
+            float(i), i, "laser", float(ANGLES[0]), float(ANGLES[1] - ANGLES[0]), RANGE_MAX, R[i]
+        )
+        pose = Pose2D(*odo[i], stamp=float(i))
+        a, b = on.process(scan, pose), off.process(scan, pose)
+        got_on.append((a.pose.x, a.pose.y, a.pose.theta))
+        got_off.append((b.pose.x, b.pose.y, b.pose.theta))
+        assert a.pose.frame_id == "map" and a.correction is not None
+        assert b.pose.frame_id == "odom" and b.correction is None
+    err_on = np.hypot(*(np.array(got_on)[:, :2] - truth[:, :2]).T)
+    err_off = np.hypot(*(np.array(got_off)[:, :2] - truth[:, :2]).T)
+    assert err_off.max() > 2.0 and err_on.max() < 0.25
+    assert ate(truth, np.array(got_on))[0].rmse < 0.1 < ate(truth, np.array(got_off))[0].rmse
+    # the graph lives in the corrected frame and says so
+    assert on.messages()[0]["frame_id"] == "map" and off.messages()[0]["frame_id"] == "odom"
+    assert graph_message(on.state_document(), 0.0)["frame_id"] == "odom"  # the default stays
+    assert math.isfinite(float(a.correction[2]))
+
+
+def _no_people():  # type: ignore[no-untyped-def]
+    from agent.core.pipeline import PeopleParams
+
+    return PeopleParams(enabled=False)

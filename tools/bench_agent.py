@@ -148,7 +148,9 @@ def bench_latency(
                 parser.feed(raw[:-LAST_READ])  # the telegram's head is already in
                 current[0] = i
                 got.clear()
-                now = time.time()
+                # the scan arrives as it is taken: its stamp is simulated time (epoch-based, running
+                # ahead of the wall clock), and OdomSync refuses stamps too far ahead of `now`
+                now = float(chunk.stamps[i])
                 c0 = time.thread_time_ns()
                 t0 = time.perf_counter_ns()
                 events = parser.feed(raw[-LAST_READ:])

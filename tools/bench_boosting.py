@@ -8,6 +8,7 @@ The speed-up is measured in CPU seconds of this process (``time.process_time``),
 jobs on a shared machine disturb much less than wall-clock time; both are reported.
 
     python -m tools.bench_boosting [--n-train 30000] [--features 300] [--rounds 100]
+                                   [--json | --json-file FILE]
 
 scikit-learn is a bench-only dependency (``pip install -e '.[bench]'``); it is imported lazily
 and the baseline is skipped with a message when it is missing. :func:`run` takes any

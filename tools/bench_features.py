@@ -19,6 +19,7 @@ the slices: on a shared machine short runs that nobody interrupted are the best 
 the code's own cost. The machine's load average is reported because other processes skew them.
 
     python -m tools.bench_features [--scans 20000] [--reference 4] [--no-compile]
+                                   [--json | --json-file FILE]
 """
 
 from __future__ import annotations

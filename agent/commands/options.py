@@ -18,7 +18,7 @@ parser and checks it):
   they happen (``loci sick scan``).
 
 No other spelling (``--json FILE``, ``--json [FILE]``, JSON lines under ``--json``) is used.
-Non-finite numbers are refused: NaN and Infinity are not JSON.
+The helpers here refuse non-finite numbers: NaN and Infinity are not JSON.
 """
 
 from __future__ import annotations

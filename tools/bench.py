@@ -2,8 +2,9 @@
 
 Each benchmark measures speed as a ratio against a baseline run in the same process (the
 slow reference implementation, scikit-learn, the line rate, ...). This driver runs them
-one after the other (never in parallel: they would disturb each other), saves each one's
-JSON beside its printed report, and writes ``bench.md`` with the commands and the reports.
+one after the other (never in parallel: they would disturb each other), each once with
+``--json-file bench/NAME.json`` (its numbers) while its text report is kept in
+``bench/NAME.md``, and writes ``bench.md`` with the commands and the reports.
 
 Run: ``make bench`` or ``python -m tools.bench --out docs/results``.
 """
@@ -68,26 +69,16 @@ BENCHMARKS: list[tuple[str, str, list[str], str]] = [
     ),
 ]
 
-#: benchmarks whose --json takes a file (the others print JSON with --json)
-JSON_FILE = {
-    "raycast",
-    "features",
-    "labeling",
-    "boosting",
-    "topology",
-    "agent",
-    "conceptual",
-    "objects",
-    "replay",
-    "localization",
-}
 
-
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m tools.bench", description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=Path("docs/results"), help="where bench.md and the JSON go")
     ap.add_argument("--only", action="append", default=[], help="run only these (repeatable)")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     outdir = args.out / "bench"
     outdir.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ, NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
@@ -96,9 +87,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.only and name not in args.only:
             continue
         json_path = outdir / f"{name}.json"
-        cmd = [sys.executable, "-m", module, *extra]
-        if name in JSON_FILE:
-            cmd += ["--json", str(json_path)]
+        # each benchmark prints its text report and writes the same numbers with --json-file
+        cmd = [sys.executable, "-m", module, *extra, "--json-file", str(json_path)]
         print(f"[bench] {name}: {what} ...", file=sys.stderr, flush=True)
         load = os.getloadavg()[0]
         t0 = time.perf_counter()
@@ -109,11 +99,6 @@ def main(argv: list[str] | None = None) -> int:
             report = f"FAILED (exit {proc.returncode})\n{proc.stderr[-2000:]}"
         else:
             report = proc.stdout.rstrip()
-            if name not in JSON_FILE:
-                # these print their report as text; ask again for JSON
-                js = subprocess.run([*cmd, "--json"], capture_output=True, text=True, env=env)
-                if js.returncode == 0:
-                    atomic_write_text(json_path, js.stdout)
         shown = " ".join(["python -m", module, *extra])
         when = datetime.now(UTC).date().isoformat()
         section = [

@@ -31,7 +31,7 @@ on every lap, which is not what the memory measurement is about).
 
 The baselines, in the same process: the 5 ms target and the LMS's own 37.5 Hz scan rate.
 
-    python -m tools.bench_agent [--only latency|rate|memory] [--quick] [--json [FILE]]
+    python -m tools.bench_agent [--only latency|rate|memory] [--quick] [--json | --json-file FILE]
 """
 
 from __future__ import annotations
@@ -39,7 +39,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import gc
-import json
 import math
 import os
 import resource
@@ -61,13 +60,13 @@ from agent.bus.codecs import LASER_SCAN_CODEC, POSE_CODEC, json_codec
 from agent.bus.keys import stream_key
 from agent.bus.session import BusConfig, close_session, open_session
 from agent.bus.testing import session_pair, settle, wait_until
+from agent.commands.options import add_json_file_option, add_json_option, emit_result
 from agent.core.odom_sync import OdomSync
 from agent.core.pipeline import PeopleParams, Pipeline, PipelineParams, place_message
 from drivers.messages import LaserScan
 from drivers.sick import telegrams as tg
 from drivers.sick.codec import StreamParser, Telegram
 from drivers.sick.constants import MeasuringMode, Units
-from knowledge.fileio import atomic_write_text
 from knowledge.places.model import PlaceModel, default_model_path
 from sim.drives import LMS_HZ, N_BEAMS, DriveScans, make_scan, telegram_values
 
@@ -149,7 +148,9 @@ def bench_latency(
                 parser.feed(raw[:-LAST_READ])  # the telegram's head is already in
                 current[0] = i
                 got.clear()
-                now = time.time()
+                # the scan arrives as it is taken: its stamp is simulated time (epoch-based, running
+                # ahead of the wall clock), and OdomSync refuses stamps too far ahead of `now`
+                now = float(chunk.stamps[i])
                 c0 = time.thread_time_ns()
                 t0 = time.perf_counter_ns()
                 events = parser.feed(raw[-LAST_READ:])
@@ -633,7 +634,7 @@ def report(r: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m tools.bench_agent", description=__doc__.split("\n\n")[0])
     ap.add_argument(
         "--only",
@@ -658,14 +659,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=20,
         help="memory: tracemalloc over the last N simulated minutes (0: off; it triples the time per scan)",
     )
-    ap.add_argument(
-        "--json",
-        nargs="?",
-        const="-",
-        metavar="FILE",
-        help="write the result as JSON to FILE (or print it when no FILE is given)",
-    )
-    args = ap.parse_args(argv)
+    add_json_option(ap)
+    add_json_file_option(ap)
+    return ap
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     r = run(
         tuple(args.only or ("latency", "rate", "memory")),
         quick=args.quick,
@@ -675,12 +675,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         trace_minutes=args.trace_minutes,
         progress=lambda msg: print(f"[bench_agent] {msg}", file=sys.stderr, flush=True),
     )
-    if args.json == "-":
-        print(json.dumps(r))
-        return 0
-    if args.json:
-        atomic_write_text(Path(args.json), json.dumps(r, indent=1) + "\n")
-    print(report(r))
+    emit_result(args, r, report)
     return 0
 
 

@@ -8,6 +8,7 @@ The speed-up is measured in CPU seconds of this process (``time.process_time``),
 jobs on a shared machine disturb much less than wall-clock time; both are reported.
 
     python -m tools.bench_boosting [--n-train 30000] [--features 300] [--rounds 100]
+                                   [--json | --json-file FILE]
 
 scikit-learn is a bench-only dependency (``pip install -e '.[bench]'``); it is imported lazily
 and the baseline is skipped with a message when it is missing. :func:`run` takes any
@@ -20,18 +21,16 @@ import argparse
 import contextlib
 import importlib
 import inspect
-import json
 import sys
 import time
 import tracemalloc
 from collections.abc import Callable, Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from knowledge.fileio import atomic_write_text
+from agent.commands.options import add_json_file_option, add_json_option, emit_result
 from knowledge.learning.boosting import GeneralizedAdaBoost
 from knowledge.learning.weak import SortedFeatures
 
@@ -197,7 +196,7 @@ def format_result(r: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m tools.bench_boosting", description=__doc__.split("\n")[0]
     )
@@ -208,8 +207,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--scans", action="store_true", help="use the place features of synthetic scans (slow to compute)"
     )
     parser.add_argument("--no-baseline", action="store_true", help="skip scikit-learn")
-    parser.add_argument("--json", type=Path, help="also write the numbers to this JSON file")
-    args = parser.parse_args(argv)
+    add_json_option(parser)
+    add_json_file_option(parser)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     r = run(
         n_rounds=args.rounds,
         n_train=args.n_train,
@@ -217,9 +221,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         baseline=not args.no_baseline,
         scans=args.scans,
     )
-    print(format_result(r))
-    if args.json:
-        atomic_write_text(args.json, json.dumps(r, indent=2) + "\n")
+    emit_result(args, r, format_result)
     return 0
 
 

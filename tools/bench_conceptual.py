@@ -10,14 +10,13 @@
 The map grows as the benchmark runs (one room with objects per repetition, plus ``--areas``
 filler areas with objects), so the later repetitions reason over a building-sized map.
 
-    python -m tools.bench_conceptual [--repeat 15] [--areas 30] [--debounce 0.2] [--json [FILE]]
+    python -m tools.bench_conceptual [--repeat 15] [--areas 30] [--debounce 0.2] [--json | --json-file FILE]
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
-import json
 import sys
 import time
 from collections.abc import Sequence
@@ -26,9 +25,9 @@ from typing import Any
 
 import numpy as np
 
+from agent.commands.options import add_json_file_option, add_json_option, emit_result
 from agent.conceptual_service import ConceptualService
 from knowledge.conceptual import ConceptualMap
-from knowledge.fileio import atomic_write_text
 
 INFERENCE_TARGET_S = 2.0
 QUERY_TARGET_S = 0.1
@@ -116,33 +115,41 @@ def run(repeat: int = 15, areas: int = 30, debounce: float = 0.2, queries: int =
     return asyncio.run(_run(repeat, areas, debounce, queries))
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(
-        prog="python -m tools.bench_conceptual", description=__doc__.split("\n\n")[0]
-    )
-    ap.add_argument("--repeat", type=int, default=15, help="inference measurements (default: 15)")
-    ap.add_argument("--areas", type=int, default=30, help="filler areas with an object each (default: 30)")
-    ap.add_argument("--debounce", type=float, default=0.2, help="service debounce in seconds (default: 0.2)")
-    ap.add_argument("--json", nargs="?", const="-", metavar="FILE", help="print JSON (or write it to FILE)")
-    args = ap.parse_args(argv)
-    r = run(args.repeat, args.areas, args.debounce)
-    if args.json == "-":
-        print(json.dumps(r, indent=1))
-        return 0
-    if args.json:
-        atomic_write_text(args.json, json.dumps(r, indent=1) + "\n")
-    print(f"Conceptual map: {r['areas']} areas, {r['objects']} objects, debounce {r['debounce_s']} s")
-    print(f"  service start (Java check, ontology load): {r['start_s']} s")
+def report(r: dict[str, Any]) -> str:
+    """The result as text."""
+    lines = [
+        f"Conceptual map: {r['areas']} areas, {r['objects']} objects, debounce {r['debounce_s']} s",
+        f"  service start (Java check, ontology load): {r['start_s']} s",
+    ]
     for key, what in (
         ("inference", "add_object → LivingRoom in snapshot()"),
         ("query", "snapshot() + resolve() from the cache"),
         ("reason", "reason() alone (one HermiT run)"),
     ):
         s = r[key]
-        print(
+        lines.append(
             f"  {what}: p50 {s['p50_ms']} ms, p99 {s['p99_ms']} ms, max {s['max_ms']} ms; "
             f"target {s['target_ms']} ms → ratio {s['target_ratio']}"
         )
+    return "\n".join(lines)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="python -m tools.bench_conceptual", description=__doc__.split("\n\n")[0]
+    )
+    ap.add_argument("--repeat", type=int, default=15, help="inference measurements (default: 15)")
+    ap.add_argument("--areas", type=int, default=30, help="filler areas with an object each (default: 30)")
+    ap.add_argument("--debounce", type=float, default=0.2, help="service debounce in seconds (default: 0.2)")
+    add_json_option(ap)
+    add_json_file_option(ap)
+    return ap
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    r = run(args.repeat, args.areas, args.debounce)
+    emit_result(args, r, report)
     return 0
 
 

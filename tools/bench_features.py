@@ -19,25 +19,24 @@ the slices: on a shared machine short runs that nobody interrupted are the best 
 the code's own cost. The machine's load average is reported because other processes skew them.
 
     python -m tools.bench_features [--scans 20000] [--reference 4] [--no-compile]
+                                   [--json | --json-file FILE]
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import subprocess
 import sys
 import tempfile
 import time
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from agent.commands.options import add_json_file_option, add_json_option, emit_result
 from agent.datasets import REPO
-from knowledge.fileio import atomic_write_text
 from knowledge.places.features import FeatureExtractor, default_feature_names
 from knowledge.places.features.reference import reference_features
 from knowledge.places.features.registry import FAMILIES, parse_name
@@ -279,7 +278,7 @@ def format_result(r: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m tools.bench_features", description=__doc__.split("\n")[0]
     )
@@ -289,8 +288,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=5, help="timed runs per slice; the fastest counts")
     parser.add_argument("--no-breakdown", action="store_true", help="skip the per-group timing")
     parser.add_argument("--no-compile", action="store_true", help="skip the cold-cache compile timing")
-    parser.add_argument("--json", type=Path, help="also write the numbers to this JSON file")
-    args = parser.parse_args(argv)
+    add_json_option(parser)
+    add_json_file_option(parser)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     r = run(
         args.scans,
         subset_size=args.subset,
@@ -299,9 +303,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         breakdown=not args.no_breakdown,
         compile_time=not args.no_compile,
     )
-    print(format_result(r))
-    if args.json:
-        atomic_write_text(args.json, json.dumps(r, indent=2) + "\n")
+    emit_result(args, r, format_result)
     return 0
 
 

@@ -9,13 +9,12 @@ reference parts (the cell-by-cell ray caster and the plain-Python feature defini
 on a sample of cells, extrapolated per cell: it is what the method costs without the
 engineering. numba is limited to one thread for the run.
 
-Run: ``python -m tools.bench_labeling [--model M] [--json FILE]``.
+Run: ``python -m tools.bench_labeling [--model M] [--json | --json-file FILE]``.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -27,6 +26,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import numpy as np
 
+from agent.commands.options import add_json_file_option, add_json_option, emit_result
 from agent.datasets import data_dir
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.metric.raycast import reference_cast
@@ -93,31 +93,36 @@ def run(data: Path | None = None, model_path: Path | None = None, *, sample: int
     }
 
 
-def main(argv: list[str] | None = None) -> int:
+def report(r: dict[str, Any]) -> str:
+    """The result as text."""
+    return "\n".join(
+        [
+            f"whole-map labeling of lab_intel: {r['free_cells']:,} cells × {r['beams']} beams",
+            f"  {r['seconds']:.2f} s wall ({r['cpu_seconds']:.2f} s CPU, one thread): cast {r['stages_s']['cast']:.2f} s, "
+            f"features + classify {r['stages_s']['classify']:.2f} s; {r['per_cell_us']:.1f} µs per cell",
+            f"  target ≤ {r['target_seconds']:.0f} s; the C++ reference takes {CPP_REFERENCE_SECONDS:.0f} s "
+            f"({r['speedup_vs_cpp_reference']:.1f}× faster)",
+            f"  reference parts in this process: {r['reference_pipeline_per_cell_ms']:.1f} ms per cell "
+            f"→ {r['speedup_vs_reference_pipeline']:.0f}× slower than the pipeline",
+            f"  peak traced memory {r['peak_traced_mb']:.0f} MB",
+        ]
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m tools.bench_labeling", description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=None)
     ap.add_argument("--model", type=Path, default=None, help="place model (default: the bundled one)")
     ap.add_argument("--sample", type=int, default=40, help="cells for the reference baseline")
-    ap.add_argument("--json", type=Path, help="also write the numbers to this JSON file")
-    args = ap.parse_args(argv)
+    add_json_option(ap)
+    add_json_file_option(ap)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     r = run(args.data, args.model, sample=args.sample)
-    print(f"whole-map labeling of lab_intel: {r['free_cells']:,} cells × {r['beams']} beams")
-    print(
-        f"  {r['seconds']:.2f} s wall ({r['cpu_seconds']:.2f} s CPU, one thread): cast {r['stages_s']['cast']:.2f} s, "
-        f"features + classify {r['stages_s']['classify']:.2f} s; {r['per_cell_us']:.1f} µs per cell"
-    )
-    print(
-        f"  target ≤ {r['target_seconds']:.0f} s; the C++ reference takes {CPP_REFERENCE_SECONDS:.0f} s "
-        f"({r['speedup_vs_cpp_reference']:.1f}× faster)"
-    )
-    print(
-        f"  reference parts in this process: {r['reference_pipeline_per_cell_ms']:.1f} ms per cell "
-        f"→ {r['speedup_vs_reference_pipeline']:.0f}× slower than the pipeline"
-    )
-    print(f"  peak traced memory {r['peak_traced_mb']:.0f} MB")
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(r, indent=2) + "\n")
+    emit_result(args, r, report)
     return 0
 
 

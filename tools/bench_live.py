@@ -15,7 +15,7 @@ Per scan it reports the time of the pipeline and of the live view's calls (p50, 
 whole per-scan path's p99 against the agent's 5 ms target. The occupancy grid is sent at
 most once a second (``grid_period``), as in the agent.
 
-    python -m tools.bench_live [--scans N] [--json]
+    python -m tools.bench_live [--scans N] [--json | --json-file FILE]
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from agent.commands.options import add_json_file_option, add_json_option, emit_result
 from agent.core.pipeline import Pipeline, PipelineParams
 from agent.live.probe import connect
 from agent.live.server import LiveView
@@ -189,17 +190,22 @@ def report(r: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="python -m tools.bench_live", description=__doc__.split("\n\n")[0])
     ap.add_argument("--scans", type=int, default=600)
-    ap.add_argument("--json", action="store_true", help="print the result as JSON")
+    add_json_option(ap)
+    add_json_file_option(ap)
     ap.add_argument("--watch", metavar="URL", help=argparse.SUPPRESS)  # the client process
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     if args.watch:
         asyncio.run(_watch(args.watch))
         return 0
     r = run(args.scans)
-    print(json.dumps(r, indent=1) if args.json else report(r))
+    emit_result(args, r, report)
     return 0
 
 

@@ -13,14 +13,12 @@ ratio says what the compiled kernel buys. After the warm-up the particles have g
 the map, as in global localization's first updates, whose lookups miss the caches.
 Target: 10,000 particles at ≥ 10 Hz.
 
-    python -m tools.bench_localization [--beams 180] [--json out.json]
+    python -m tools.bench_localization [--beams 180] [--json] [--json-file out.json]
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
 import time
 from dataclasses import replace
@@ -29,12 +27,13 @@ from typing import Any
 
 import numpy as np
 
-from knowledge.fileio import atomic_write_text
+from agent.commands.options import add_json_file_option, add_json_option, emit_result
+from agent.datasets import data_dir
 from knowledge.localization.likelihood import LikelihoodField
 from knowledge.localization.mcl import MclParams, ParticleFilter, beam_log_likelihood
 from knowledge.metric.mapping import ScanMapper
 
-DEFAULT_DATA = Path(os.environ.get("LOCI_DATA", Path(__file__).resolve().parents[3] / "shared" / "data"))
+DEFAULT_DATA = data_dir()
 LOG = Path("logs") / "csail-corrected.log.gz"
 COUNTS = (1_000, 2_000, 5_000, 10_000, 20_000, 50_000)
 
@@ -151,18 +150,20 @@ def report(res: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="python -m tools.bench_localization", description=__doc__.split("\n\n")[0]
     )
-    ap.add_argument("--data", type=Path, default=DEFAULT_DATA)
-    ap.add_argument("--beams", type=int, default=180)
-    ap.add_argument("--json", type=Path, help="write the numbers here")
-    args = ap.parse_args(argv)
-    res = run(args.data, args.beams)
-    print(report(res))
-    if args.json:
-        atomic_write_text(args.json, json.dumps(res, indent=1) + "\n")
+    ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="the real data folder")
+    ap.add_argument("--beams", type=int, default=180, help="beams per scan (default 180)")
+    add_json_option(ap)
+    add_json_file_option(ap)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    emit_result(args, run(args.data, args.beams), report)
     return 0
 
 

@@ -12,13 +12,12 @@ detection is any reported object that is not in the frame.
 Time per frame is ``ObjectRecogniser.recognise`` (SIFT on the frame + matching + RANSAC),
 compared with SIFT extraction alone on the same frames (the baseline, same process).
 
-Run: ``python -m tools.bench_objects [--json FILE]``.
+Run: ``python -m tools.bench_objects [--json | --json-file FILE]``.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import tempfile
@@ -29,8 +28,8 @@ from typing import Any
 
 import numpy as np
 
+from agent.commands.options import add_json_file_option, add_json_option, emit_result
 from drivers.messages import Pose2D
-from knowledge.fileio import atomic_write_text
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.objects import ObjectDatabase, ObjectRecogniser, extract_features
 from sim.camera_view import CameraMount, VirtualCamera
@@ -200,14 +199,17 @@ def report(r: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m tools.bench_objects", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--json", type=Path, metavar="FILE", help="also write the results as JSON")
-    args = ap.parse_args(argv)
+    add_json_option(ap)
+    add_json_file_option(ap)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     r = run()
-    print(report(r))
-    if args.json:
-        atomic_write_text(args.json, json.dumps(r, indent=2) + "\n")
+    emit_result(args, r, report)
     return 0
 
 

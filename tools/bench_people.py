@@ -10,13 +10,12 @@ so that the static cells and the free-space evidence run as in the agent.
 Scans: the legs data's TEST split scans (positive_6, the rear laser's negative_2 test scans)
 when the data folder is there, else scans of simulated people walking in a ray-cast room.
 
-    python -m tools.bench_people [--data DIR] [--scans 600] [--json]
+    python -m tools.bench_people [--data DIR] [--scans 600] [--json | --json-file FILE]
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time
@@ -25,6 +24,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from agent.commands.options import add_json_file_option, add_json_option, emit_result
 
 #: Scans per second the budget is computed for (SICK LMS 2xx at its fastest, and the issue's target).
 RATE_HZ = 75.0
@@ -188,38 +189,43 @@ def run(data: Path | None = None, *, n_scans: int = 600, warmup: int = 20) -> di
     }
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    from agent.datasets import data_dir
+def report(r: dict[str, Any]) -> str:
+    """The result as text."""
+    s = r["stages_p50_ms"]
+    return "\n".join(
+        [
+            f"People detection per {r['beams']}-beam scan, {r['scans']} scans of {r['source']}",
+            f"  budget at {r['rate_hz']:g} Hz: {r['budget_ms']} ms (baseline)",
+            f"  p50 {r['p50_ms']} ms, p99 {r['p99_ms']} ms, max {r['max_ms']} ms  "
+            f"-> p99 is {r['budget_ratio']}x faster than real time ({100 * r['p99_share_of_budget']:.1f}% of the budget)",
+            f"  with the laser's odometry pose (static cells, free-space evidence): p50 {r['with_pose_p50_ms']} ms, "
+            f"p99 {r['with_pose_p99_ms']} ms -> {r['with_pose_budget_ratio']}x faster than real time",
+            f"  stages (p50): segmentation+features {s['segmentation_features']} ms, classification "
+            f"{s['classification']} ms, pairing {s['pairing']} ms, tracking {s['tracking']} ms",
+            f"  {r['segments_per_scan']} segments and {r['legs_per_scan']} legs per scan on average",
+        ]
+    )
 
+
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m tools.bench_people", description=__doc__.split("\n\n")[0])
     ap.add_argument(
         "--data", type=Path, help="the shared data folder (default: $LOCI_DATA or ../shared/data)"
     )
     ap.add_argument("--sim", action="store_true", help="use simulated scans even if the data is there")
     ap.add_argument("--scans", type=int, default=600, help="scans to time (default: 600)")
-    ap.add_argument("--json", action="store_true", help="print the result as JSON")
-    args = ap.parse_args(argv)
+    add_json_option(ap)
+    add_json_file_option(ap)
+    return ap
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    from agent.datasets import data_dir
+
+    args = build_parser().parse_args(argv)
     data = None if args.sim else (args.data or data_dir())
     r = run(data, n_scans=args.scans)
-    if args.json:
-        print(json.dumps(r))
-        return 0
-    print(f"People detection per {r['beams']}-beam scan, {r['scans']} scans of {r['source']}")
-    print(f"  budget at {r['rate_hz']:g} Hz: {r['budget_ms']} ms (baseline)")
-    print(
-        f"  p50 {r['p50_ms']} ms, p99 {r['p99_ms']} ms, max {r['max_ms']} ms  "
-        f"-> p99 is {r['budget_ratio']}x faster than real time ({100 * r['p99_share_of_budget']:.1f}% of the budget)"
-    )
-    print(
-        f"  with the laser's odometry pose (static cells, free-space evidence): p50 {r['with_pose_p50_ms']} ms, "
-        f"p99 {r['with_pose_p99_ms']} ms -> {r['with_pose_budget_ratio']}x faster than real time"
-    )
-    s = r["stages_p50_ms"]
-    print(
-        f"  stages (p50): segmentation+features {s['segmentation_features']} ms, classification "
-        f"{s['classification']} ms, pairing {s['pairing']} ms, tracking {s['tracking']} ms"
-    )
-    print(f"  {r['segments_per_scan']} segments and {r['legs_per_scan']} legs per scan on average")
+    emit_result(args, r, report)
     return 0
 
 

@@ -13,7 +13,7 @@ Measures, in one process and on one core:
 
 The casters are warmed up (compiled or loaded) before anything is timed.
 
-    python -m tools.bench_raycast [--data ../shared/data] [--beams 360] [--json out.json]
+    python -m tools.bench_raycast [--data ../shared/data] [--beams 360] [--json | --json-file OUT.json]
 
 :func:`run` returns the numbers as a dict; it needs the ipa maps under ``data_dir``
 (``../shared/data`` by default) and raises FileNotFoundError naming the file otherwise.
@@ -36,8 +36,8 @@ from typing import Any
 
 import numpy as np
 
+from agent.commands.options import add_json_file_option, add_json_option, emit_result
 from agent.datasets import REPO, data_dir
-from knowledge.fileio import atomic_write_text
 from knowledge.metric import OccupancyGrid
 from knowledge.metric.raycast import cast, cast_cells, reference_cast
 
@@ -216,24 +216,27 @@ def format_result(r: dict[str, Any]) -> str:
     )
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m tools.bench_raycast", description=__doc__.split("\n")[0])
     parser.add_argument(
         "--data", type=Path, default=None, help="the shared data folder (default ../shared/data)"
     )
     parser.add_argument("--beams", type=int, default=360)
     parser.add_argument("--poses", type=int, default=2000, help="random poses for cast")
-    parser.add_argument("--json", type=Path, help="also write the numbers to this JSON file")
+    add_json_option(parser)
+    add_json_file_option(parser)
     parser.add_argument("--no-compile-time", action="store_true", help="skip measuring numba's compile time")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     try:
         r = run(args.data, n_beams=args.beams, n_poses=args.poses, compile_time=not args.no_compile_time)
     except FileNotFoundError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    print(format_result(r))
-    if args.json:
-        atomic_write_text(args.json, json.dumps(r, indent=2) + "\n")
+    emit_result(args, r, format_result)
     return 0
 
 

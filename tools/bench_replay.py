@@ -13,7 +13,7 @@ association, the pipeline with people on, navigation graph and areas). Measured:
 
 Without ``../shared/data`` (or ``$LOCI_DATA``) it says so and exits 2.
 
-    python -m tools.bench_replay [--scans N] [--json FILE]
+    python -m tools.bench_replay [--scans N] [--json | --json-file FILE]
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from agent.commands.options import add_json_file_option, add_json_option, emit_result
 from agent.datasets import data_dir
 
 DATA = data_dir()
@@ -71,13 +72,18 @@ def per_scan(path: Path, model: Any, people: bool, limit: int | None) -> np.ndar
     return ms
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m tools.bench_replay", description=__doc__.split("\n\n")[0])
     ap.add_argument(
         "--scans", type=int, default=None, help="time only the first N scans per scan (default all)"
     )
-    ap.add_argument("--json", type=Path, default=None, metavar="FILE", help="also write the result as JSON")
-    args = ap.parse_args(argv)
+    add_json_option(ap)
+    add_json_file_option(ap)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     log = DATA / LOG
     if not log.is_file():
         print(f"{log} is absent: the real-log benchmark needs ../shared/data (or LOCI_DATA)", file=sys.stderr)
@@ -123,11 +129,19 @@ def main(argv: list[str] | None = None) -> int:
         "load": round(os.getloadavg()[0], 2),
         "mount": list(imp.mount),
     }
+    emit_result(args, out, report)
+    return 0
+
+
+def report(out: dict[str, Any]) -> str:
+    """The result as text."""
+    timing = out["per_scan_ms"]
+    budget = out["budget_ms_at_75hz"]
     p99 = timing["people on"]["p99"]
     lines = [
-        f"replay of the real Freiburg 079 log ({LOG}): {res.scans:,} scans of 360 beams over 180°",
-        f"  import {import_s:.1f} s; replay {replay_s:.1f} s = {out['scans_per_s']:,} scans/s, "
-        f"{out['x_real_time']}x the log's own pace ({stamps_s / 60:.1f} min recorded)",
+        f"replay of the real Freiburg 079 log ({out['log']}): {out['scans']:,} scans of 360 beams over 180°",
+        f"  import {out['import_s']:.1f} s; replay {out['replay_s']:.1f} s = {out['scans_per_s']:,} scans/s, "
+        f"{out['x_real_time']}x the log's own pace ({out['log_duration_s'] / 60:.1f} min recorded)",
         "  Pipeline.process per real scan, ms     p50      p99      max",
     ]
     for name, v in timing.items():
@@ -136,10 +150,7 @@ def main(argv: list[str] | None = None) -> int:
         f"  the LMS's period at 75 Hz is {budget:.1f} ms: the p99 scan (people on) takes {p99 / budget:.2f} of it "
         f"({budget / p99:.1f}x inside); load average {out['load']}"
     )
-    print("\n".join(lines))
-    if args.json is not None:
-        args.json.write_text(json.dumps(out, indent=1) + "\n")
-    return 0
+    return "\n".join(lines)
 
 
 def _duration(path: Path) -> float:

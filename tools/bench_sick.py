@@ -8,13 +8,12 @@ line itself: at 500 kbaud with 10 bits per byte (8N1) it carries at most
 one core could keep up with. Times are CPU seconds of this process (``time.process_time``),
 which other jobs on a shared machine disturb less than wall-clock time; both are reported.
 
-    python -m tools.bench_sick [--telegrams 2000] [--chunk 1024] [--json]
+    python -m tools.bench_sick [--telegrams 2000] [--chunk 1024] [--json | --json-file FILE]
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -22,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from agent.commands.options import add_json_file_option, add_json_option, emit_result
 from drivers.sick import telegrams as tg
 from drivers.sick.codec import StreamParser, Telegram, crc16, crc16_reference
 from drivers.sick.constants import Units
@@ -113,7 +113,20 @@ def run(
     }
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def report(r: dict[str, Any]) -> str:
+    """The result as text."""
+    return "\n".join(
+        [
+            f"LMS codec, {r['telegrams']} telegrams of {r['telegram_bytes']} bytes, fed {r['chunk_bytes']} bytes at a time",
+            f"  line at {r['baud']} baud:   {r['line_telegrams_per_s']:10.1f} telegrams/s (baseline)",
+            f"  parse (framing + CRC):  {r['parse_telegrams_per_s']:10.1f} telegrams/s  = {r['parse_ratio_to_line']}x the line",
+            f"  parse + decode to m:    {r['decode_telegrams_per_s']:10.1f} telegrams/s  = {r['decode_ratio_to_line']}x the line",
+            f"  CRC of one telegram:    {r['crc_table_us']} µs (table) vs {r['crc_loop_us']} µs (byte loop)",
+        ]
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m tools.bench_sick", description=__doc__.split("\n\n")[0])
     ap.add_argument(
         "--telegrams", type=int, default=2000, help="0xB0 telegrams in the buffer (default: 2000)"
@@ -122,23 +135,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--chunk", type=int, default=1024, help="bytes per feed, like serial reads (default: 1024)"
     )
     ap.add_argument("--baud", type=int, default=500_000, help="line rate to compare with (default: 500000)")
-    ap.add_argument("--json", action="store_true", help="print the result as JSON")
-    args = ap.parse_args(argv)
+    add_json_option(ap)
+    add_json_file_option(ap)
+    return ap
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     r = run(args.telegrams, chunk=args.chunk, baud=args.baud)
-    if args.json:
-        print(json.dumps(r))
-        return 0
-    print(
-        f"LMS codec, {r['telegrams']} telegrams of {r['telegram_bytes']} bytes, fed {r['chunk_bytes']} bytes at a time"
-    )
-    print(f"  line at {r['baud']} baud:   {r['line_telegrams_per_s']:10.1f} telegrams/s (baseline)")
-    print(
-        f"  parse (framing + CRC):  {r['parse_telegrams_per_s']:10.1f} telegrams/s  = {r['parse_ratio_to_line']}x the line"
-    )
-    print(
-        f"  parse + decode to m:    {r['decode_telegrams_per_s']:10.1f} telegrams/s  = {r['decode_ratio_to_line']}x the line"
-    )
-    print(f"  CRC of one telegram:    {r['crc_table_us']} µs (table) vs {r['crc_loop_us']} µs (byte loop)")
+    emit_result(args, r, report)
     return 0
 
 

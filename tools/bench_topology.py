@@ -16,13 +16,12 @@ with the graph, the JSON document and the pictures. Peak memory is traced per st
 process's peak resident size is reported at the end.
 
     python -m tools.bench_topology [--map PATH] [--model M | --synthetic] [--iterations 50]
-                                         [--no-baseline] [--json OUT]
+                                         [--no-baseline] [--json | --json-file OUT]
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import resource
 import sys
 import time
@@ -34,8 +33,8 @@ from typing import Any, TypeVar
 import cv2
 import numpy as np
 
+from agent.commands.options import add_json_file_option, add_json_option, emit_result
 from agent.datasets import data_dir
-from knowledge.fileio import atomic_write_text
 from knowledge.labels import CORRIDOR, DOORWAY, ROOM
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.places.labeling import label_map
@@ -236,7 +235,7 @@ def format_result(r: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     doc = (__doc__ or "").split("\n")[0]
     parser = argparse.ArgumentParser(prog="python -m tools.bench_topology", description=doc)
     parser.add_argument("--map", type=Path, default=None, help=f"map image (default: {DEFAULT_MAP})")
@@ -246,7 +245,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--synthetic", action="store_true", help="synthetic histograms, no classifier")
     parser.add_argument("--iterations", type=int, default=50)
     parser.add_argument("--no-baseline", action="store_true", help="skip the numpy backend")
-    parser.add_argument("--json", type=Path, help="also write the numbers to this JSON file")
+    add_json_option(parser)
+    add_json_file_option(parser)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
     args = parser.parse_args(argv)
     model, name = None, ""
     if not args.synthetic:
@@ -258,10 +263,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         else:
             print(f"no bundled model at {path}: synthetic histograms", file=sys.stderr)
     r = run(args.map, iterations=args.iterations, baseline=not args.no_baseline, model=model, model_name=name)
-    print(format_result(r))
-    if args.json:
-        cmd = "python -m tools.bench_topology " + " ".join(argv if argv is not None else sys.argv[1:])
-        atomic_write_text(args.json, json.dumps({"command": cmd.strip(), **r}, indent=2) + "\n")
+    cmd = "python -m tools.bench_topology " + " ".join(argv if argv is not None else sys.argv[1:])
+    emit_result(args, {"command": cmd.strip(), **r}, format_result)
     return 0
 
 

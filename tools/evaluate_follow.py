@@ -163,11 +163,15 @@ def run_seed(seed: int, tracker: str, det: LegDetector, params: FollowParams | N
     }
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="python -m tools.evaluate_follow", description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default="0-7", help="seeds of the tour's office, e.g. 0-7 or 0,2,5")
     ap.add_argument("--out", type=Path, help="write follow_tour.md and follow_tour.json here")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     if "-" in args.seeds:
         a, b = args.seeds.split("-")
         seeds = list(range(int(a), int(b) + 1))

@@ -36,7 +36,6 @@ import argparse
 import itertools
 import json
 import math
-import os
 import sys
 import time
 from dataclasses import asdict, replace
@@ -46,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from agent.core.localization_viz import particles_picture, trajectory_picture
+from agent.datasets import data_dir
 from knowledge.fileio import atomic_write_text, write_image
 from knowledge.localization.evaluation import GlobalRun, odometry_distance, run_filter
 from knowledge.localization.likelihood import LikelihoodField
@@ -57,7 +57,7 @@ from knowledge.localization.trajectory import align, ate, rpe
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.metric.mapping import ScanMapper
 
-DATA = Path(os.environ.get("LOCI_DATA", Path(__file__).resolve().parents[2].parent / "shared" / "data"))
+DATA = data_dir()
 
 #: The filter of every global-localization run (the book: 10,000 particles, uniform start).
 GLOBAL = MclParams(particles=10_000)
@@ -538,11 +538,11 @@ def global_lines(table: dict[str, dict[str, Any]]) -> list[str]:
     return lines
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="python -m tools.evaluate_localization", description=__doc__.split("\n\n")[0]
     )
-    ap.add_argument("--out", type=Path, default=Path("docs/results"))
+    ap.add_argument("--out", type=Path, default=Path("docs/results"), help="where the tables and pictures go")
     ap.add_argument(
         "--work", type=Path, default=Path("out/localization"), help="cache of the recording, arrays and maps"
     )
@@ -555,7 +555,11 @@ def main(argv: list[str] | None = None) -> int:
         default="",
         help="comma-separated parts to skip: tracking, fr079, global, kidnap, sim, speed",
     )
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     skip = set(filter(None, args.skip.split(",")))
     if not (DATA / "logs").is_dir():
         print(f"real data folder {DATA} is absent (set LOCI_DATA)", file=sys.stderr)

@@ -598,14 +598,22 @@ def markdown(summary: dict[str, dict[str, Any]], command: str, meta: dict[str, A
     return "\n".join(lines) + "\n"
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="python -m tools.evaluate_navigation",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     ap.add_argument("--out", type=Path, default=Path("docs/results"))
     ap.add_argument("--model", type=Path, default=None, help="place model (default: the bundled one)")
     ap.add_argument("--seeds", default="0,1,2,3", help="building seeds, comma-separated (default 0,1,2,3)")
     ap.add_argument("--rooms", type=int, default=8, help="rooms per route (default 8)")
     ap.add_argument("--configs", default=None, help="indices of configurations to run (default all)")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     model_path = args.model or default_model_path()
     model = PlaceModel.load(model_path)
     seeds = [int(s) for s in args.seeds.split(",") if s.strip()]

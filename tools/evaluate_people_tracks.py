@@ -105,11 +105,17 @@ HEAD = (
 )
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="python -m tools.evaluate_people_tracks", description=__doc__.splitlines()[0]
+    )
     ap.add_argument("--data", type=Path, default=DATA, help="the shared data folder")
     ap.add_argument("--out", type=Path, default=Path("docs/results"), help="where to write the results")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     src = args.data / BAG
     if not src.is_file():
         print(f"error: {src} is absent", file=sys.stderr)

@@ -100,7 +100,7 @@ def _half_split(lmap: LabelledMap) -> tuple[LabelledMap, np.ndarray]:
     return LabelledMap(lmap.grid, left, lmap.names), right
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m tools.evaluate_places", description=__doc__.split("\n\n")[0])
     ap.add_argument(
         "--data", type=Path, default=None, help="data folder (default $LOCI_DATA or ../shared/data)"
@@ -113,7 +113,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", action="append", default=[], help="evaluate only these held-out buildings")
     ap.add_argument("--quick", action="store_true", help="skip the variants (uniform weights, half splits)")
     ap.add_argument("--quiet", action="store_true")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     data = args.data or data_dir()
     if not (data / "ipa" / "labeled").is_dir():
         print(f"no labelled maps under {data}/ipa/labeled: pass --data or set LOCI_DATA", file=sys.stderr)

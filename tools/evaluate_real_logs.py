@@ -131,13 +131,17 @@ HEAD = (
 )
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="python -m tools.evaluate_real_logs", description=__doc__.split("\n\n")[0]
     )
     ap.add_argument("--out", type=Path, default=Path("docs/results"))
     ap.add_argument("--model", type=Path, default=None, help="the place model (default: the bundled one)")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     logs = DATA / "logs"
     if not logs.is_dir():
         print(f"real data folder {DATA} is absent (set LOCI_DATA)", file=sys.stderr)

@@ -499,7 +499,7 @@ def ablation_markdown(rows: list[dict[str, Any]]) -> list[str]:
 
 
 # ---------------------------------------------------------------------- main
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="python -m tools.evaluate_topology", description=(__doc__ or "").split("\n\n")[0]
     )
@@ -533,7 +533,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--stride", type=int, default=4, help="training stride in cells (default 4)")
     ap.add_argument("--rounds", type=int, default=100, help="boosting rounds T (default 100)")
     ap.add_argument("--quiet", action="store_true")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     data = args.data or data_dir()
     if not (data / "ipa" / "labeled").is_dir():
         print(f"no labelled maps under {data}/ipa/labeled: pass --data or set LOCI_DATA", file=sys.stderr)

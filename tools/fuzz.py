@@ -44,6 +44,7 @@ from agent.bus.codecs import (
 )
 from agent.bus.keys import STREAMS
 from agent.bus.schemas import MAX_JSON_BYTES, SCHEMAS
+from agent.commands.options import add_json_option, emit_json
 from drivers.messages import CameraFrame, LaserScan, Pose2D
 from drivers.sick import telegrams as tg
 from drivers.sick.codec import StreamParser, Telegram
@@ -422,7 +423,7 @@ def replug_cycles(n: int = 30, *, away: float = 0.4, limit: float = 2.0, seed: i
 # ---------------------------------------------------------------------------- command line
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m tools.fuzz",
         description="Reliability probes: the SICK parser, every bus decoder, serial replug (make fuzz).",
@@ -432,8 +433,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--messages", type=int, default=10_000, help="inputs per bus key (default 10,000)")
     p.add_argument("--replugs", type=int, default=30, help="serial unplug/replug cycles (default 30)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--json", action="store_true", help="print one JSON object")
-    args = p.parse_args(argv)
+    add_json_option(p)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     report: dict[str, Any] = {"seed": args.seed}
     steps: list[tuple[str, Callable[[], dict[str, Any]]]] = [
         ("sick", lambda: fuzz_sick(args.telegrams, args.chunks, seed=args.seed)),
@@ -450,7 +455,7 @@ def main(argv: list[str] | None = None) -> int:
                 flush=True,
             )
     if args.json:
-        print(json.dumps(report))
+        emit_json(report)
     else:
         for stream, counts in report["decoders"]["per_stream"].items():
             print(f"  {stream}: {counts}")

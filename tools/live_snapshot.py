@@ -224,8 +224,8 @@ def _side_panel(got: dict[str, list[Received]], topics: dict[str, dict[str, Any]
     return panel[: max(height, y + 10)]
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="python -m tools.live_snapshot", description=__doc__.split("\n\n")[0])
     ap.add_argument("url", help="the live view, e.g. ws://127.0.0.1:8765")
     ap.add_argument("--seconds", type=float, default=15.0, help="how long to listen (default 15)")
     ap.add_argument(
@@ -235,7 +235,11 @@ def main(argv: list[str] | None = None) -> int:
         metavar="PNG",
         help="the picture to write (a file); PNG.json beside it",
     )
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     got, topics = asyncio.run(gather(args.url, args.seconds))
     picture = draw(got, topics)
     write_image(args.out, picture)

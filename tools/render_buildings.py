@@ -57,13 +57,17 @@ def fit(img: np.ndarray, path: Path) -> np.ndarray:
     return img
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="python -m tools.render_buildings", description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("docs/img"), help="folder for buildings_<name>.png")
     ap.add_argument(
         "--seed-offset", type=int, default=0, help="add this to every picture's seed (to browse others)"
     )
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     for name, (seed, options) in PICTURES.items():
         path = args.out / f"buildings_{name}.png"
         img, dt = render(name, seed + args.seed_offset, options)

@@ -83,12 +83,16 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="exact (default): the simulated odometry is the true pose; noisy: the base's odometry "
         "drifts (drivers.sim.base.OdometryNoise) and the agent tracks its pose by scan matching",
     )
-    p.add_argument("--json", action="store_true", help="print the summary as JSON at the end")
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="print the summary as one JSON object at the end (the conversation goes to stderr)",
+    )
     p.set_defaults(handler=cmd_demo)
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from agent.demo.tour_run import DemoOptions, run_demo
+    from agent.demo.tour_run import DemoOptions, Screen, run_demo
 
     if args.seed < 0:
         raise ValueError(f"--seed must be >= 0, got {args.seed}")
@@ -108,7 +112,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     previous = signal.signal(signal.SIGTERM, on_term)
     try:
-        summary = run_demo(opts)
+        # with --json the conversation goes to stderr: stdout holds the one JSON object
+        summary = run_demo(opts, Screen(out=sys.stderr) if args.json else None)
     finally:
         signal.signal(signal.SIGTERM, previous)
     if args.json:

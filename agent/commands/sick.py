@@ -1,7 +1,9 @@
 """``loci sick``: talk to a SICK LMS 200/211/221/291 laser scanner on a serial line.
 
 ``loci sick probe PORT`` initialises the scanner and prints what it says about itself;
-``loci sick scan PORT`` streams scans and prints the scan rate and a range summary.
+``loci sick scan PORT`` streams scans and prints the scan rate and a range summary
+(``--json-lines``: each summary as a JSON line as it comes; ``--json``: the final counters as
+one JSON object).
 PORT is a device (``/dev/ttyUSB0``, a udev symlink, the path ``loci sim lms`` prints) or a
 pyserial URL (``socket://host:4001``).
 """
@@ -10,11 +12,12 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import json
 import math
 import sys
 import time
 from typing import TYPE_CHECKING, Any
+
+from agent.commands.options import add_json_option, emit_json, emit_json_line
 
 if TYPE_CHECKING:
     from drivers.sick.driver import LMS2xx
@@ -67,7 +70,7 @@ def register(subparsers: Any) -> None:
         description="Initialise the scanner and print its type, software version, variant, units and baud rate.",
     )
     _add_link_options(probe, default_variant=None)
-    probe.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    add_json_option(probe)
     probe.set_defaults(handler=_probe)
 
     scan = sub.add_parser(
@@ -88,7 +91,13 @@ def register(subparsers: Any) -> None:
         help="stop after this many seconds of scanning, not counting start-up (default: until Ctrl-C)",
     )
     scan.add_argument("--interval", type=float, default=1.0, help="seconds between summaries (default: 1)")
-    scan.add_argument("--json", action="store_true", help="print JSON lines instead of text")
+    out = scan.add_mutually_exclusive_group()
+    add_json_option(out, help="print one JSON object at the end (the counters) instead of the text")
+    out.add_argument(
+        "--json-lines",
+        action="store_true",
+        help="print each summary as a JSON line as it comes, then the counters as the last line",
+    )
     scan.set_defaults(handler=_scan)
 
 
@@ -110,7 +119,7 @@ def _probe(args: argparse.Namespace) -> int:
 
     info = asyncio.run(run())
     if args.json:
-        print(json.dumps({"schema": "loci.sick.probe/1", **info}))
+        emit_json({"schema": "loci.sick.probe/1", **info})
         return 0
     units = 0 if info["units"] == "cm" else 1
     print(f"SICK LMS on {info['port']}")
@@ -168,10 +177,12 @@ class _Window:
         }
 
 
-def _print_summary(r: dict[str, Any], as_json: bool) -> None:
-    if as_json:
-        print(json.dumps(r), flush=True)
+def _print_summary(r: dict[str, Any], args: argparse.Namespace) -> None:
+    if args.json_lines:
+        emit_json_line(r)
         return
+    if args.json:
+        return  # one object at the end
 
     def m(x: float | None) -> str:
         return "   -  " if x is None else f"{x:6.2f}"
@@ -203,7 +214,7 @@ def _scan(args: argparse.Namespace) -> int:
             end = math.inf if args.duration is None else t0 + args.duration
             assert lms.info is not None
             info = lms.info.as_dict()
-            if not args.json:
+            if not (args.json or args.json_lines):
                 print(
                     f"{info['type_string']} on {args.port}: {info['angle_deg']}°/{info['resolution_deg']:g}°, "
                     f"{info['units']}, {info['baud']} baud",
@@ -225,7 +236,7 @@ def _scan(args: argparse.Namespace) -> int:
                         pass
                     now = time.monotonic()
                     if now >= next_report:
-                        _print_summary(window.report(now - t0, now - t_win), args.json)
+                        _print_summary(window.report(now - t0, now - t_win), args)
                         window, t_win = _Window(), now
             except asyncio.CancelledError:
                 pass  # Ctrl-C: stop the scanner, then report the counters
@@ -241,8 +252,10 @@ def _scan(args: argparse.Namespace) -> int:
             }
 
     final = asyncio.run(run())
-    if args.json:
-        print(json.dumps(final), flush=True)
+    if args.json_lines:
+        emit_json_line(final)
+    elif args.json:
+        emit_json(final)
     else:
         c = final["counters"]
         print(

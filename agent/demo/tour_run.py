@@ -456,7 +456,7 @@ def replay_check(
             "failure": f"loci replay failed: {proc.stderr.strip()[-500:]}",
             "seconds": seconds,
         }
-    stats = json.loads(proc.stdout.strip().splitlines()[-1])["stats"]
+    stats = json.loads(proc.stdout)["stats"]  # --json: stdout is one JSON object
     doc = json.loads((out_dir / "navgraph.json").read_text(encoding="utf-8"))
     removed = [
         int(s.evidence["removed"])

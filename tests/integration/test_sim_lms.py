@@ -391,9 +391,9 @@ LMS_RATE = 37.5
 
 
 def _sick_scan(link: Path, *args: str) -> tuple[list[dict[str, Any]], dict[str, Any]]:
-    """Run ``loci sick scan LINK ARGS --json``: its summaries and its final counters."""
+    """Run ``loci sick scan LINK ARGS --json-lines``: its summaries and its final counters."""
     out = subprocess.run(
-        _loci("-q", "sick", "scan", str(link), *args, "--json"),
+        _loci("-q", "sick", "scan", str(link), *args, "--json-lines"),
         cwd=REPO,
         capture_output=True,
         text=True,
@@ -426,6 +426,18 @@ def test_sim_and_sick_scan_commands_talk_over_the_pty(
     summaries, final = _sick_scan(link, "--duration", "2")
     assert len(summaries) == 2
     _check_scanning(summaries, final, 2.0)
+
+    # --json: the counters alone, as one JSON object (indented, so not one line)
+    one = subprocess.run(
+        _loci("-q", "sick", "scan", str(link), "--duration", "1", "--json"),
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert one.returncode == 0, one.stderr
+    counters = json.loads(one.stdout)
+    assert counters["schema"] == "loci.sick.counters/1" and counters["scans"] >= 1
 
     probe = subprocess.run(
         _loci("-q", "sick", "probe", str(link), "--json"),

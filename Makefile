@@ -11,6 +11,9 @@ STAMP := $(VENV)/.installed-dev
 BENCH_STAMP := $(VENV)/.installed-bench
 EVAL_STAMP := $(VENV)/.installed-eval
 OUT ?= out
+# test processes (pytest-xdist; one test file per worker at a time); TEST_WORKERS=0 runs in one process
+TEST_WORKERS ?= 2
+PYTEST := $(BIN)/pytest -n $(TEST_WORKERS) --dist loadfile
 
 .PHONY: help install demo test lint typecheck unit integration quick eval bench fuzz clean
 
@@ -53,16 +56,16 @@ typecheck: $(STAMP)
 # The fast layers first (the pure core, the contracts), so that a broken core fails in the
 # first minute; then real parts together and whole processes (docs/architecture.md).
 unit: $(STAMP)
-	$(BIN)/pytest tests/unit tests/contract
+	$(PYTEST) tests/unit tests/contract
 
 integration: $(STAMP)
-	$(BIN)/pytest tests/integration tests/e2e
+	$(PYTEST) tests/integration tests/e2e
 
 test: lint typecheck unit integration
 
 # The loop while working: every layer, without the tests marked slow.
 quick: $(STAMP)
-	$(BIN)/pytest -m "not slow" -q
+	$(PYTEST) -m "not slow" -q
 
 eval: $(EVAL_STAMP)
 	$(BIN)/python -m tools.evaluate_places --out docs/results

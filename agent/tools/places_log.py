@@ -84,6 +84,19 @@ class LabelledLog:
         return np.column_stack((X + float(a["tx_px"]), -Y + float(a["ty_px"])))
 
 
+def map_poses(log: LabelledLog, rows: int) -> np.ndarray:
+    """``(S, 3)`` the log's poses in the world frame of the aligned map (an
+    :class:`~knowledge.metric.grid.OccupancyGrid` of ``rows`` rows at ``m_per_px`` metres per
+    cell, origin at its lower-left corner): the similarity transform of the data's README."""
+    a = log.align
+    th, s = math.radians(float(a["rot_deg"])), float(a["m_per_px"])
+    x, y, h = log.poses[:, 0], float(a["mirror"]) * log.poses[:, 1], log.poses[:, 2]
+    mx = math.cos(th) * x - math.sin(th) * y + s * float(a["tx_px"])
+    my = math.sin(th) * x + math.cos(th) * y + s * (rows - float(a["ty_px"]))
+    heading = float(a["mirror"]) * h + th
+    return np.column_stack((mx, my, np.arctan2(np.sin(heading), np.cos(heading))))
+
+
 def load_fr079(data: Path) -> LabelledLog:
     """``logs/fr079_labels_provisional.npz`` and its label picture."""
     import cv2

@@ -153,6 +153,25 @@ def train_place_model(
     """Train a place model on labelled maps. Returns the model and timings (seconds)."""
     t0 = time.perf_counter()
     maps = [merge_classes(m, config.merge) for m in maps]
+    classes = _classes(maps, config)
+    scans = simulate_scans(
+        maps,
+        stride=config.stride,
+        n_beams=config.n_beams,
+        max_range=config.max_range,
+        classes=classes,
+        progress=progress,
+    )
+    t1 = time.perf_counter()
+    model, timings = train_on_scans(scans, config, maps=maps, classes=classes, progress=progress, notes=notes)
+    return model, {
+        "scans": t1 - t0,
+        **{k: v for k, v in timings.items() if k != "total"},
+        "total": time.perf_counter() - t0,
+    }
+
+
+def _classes(maps: Sequence[LabelledMap], config: TrainingConfig) -> list[str]:
     present: list[str] = []
     for m in maps:
         for name in m.class_counts():
@@ -169,41 +188,72 @@ def train_place_model(
     missing = [c for c in classes if c not in present]
     if missing:
         raise ValueError(f"classes {missing} have no labelled cells in the training maps")
-    scans = simulate_scans(
-        maps,
-        stride=config.stride,
-        n_beams=config.n_beams,
-        max_range=config.max_range,
-        classes=classes,
-        progress=progress,
-    )
+    return classes
+
+
+def train_on_scans(
+    scans: ScanSet,
+    config: TrainingConfig,
+    *,
+    maps: Sequence[LabelledMap],
+    classes: Sequence[str] | None = None,
+    X: np.ndarray | None = None,
+    sample_weight: np.ndarray | None = None,
+    progress: ProgressFn | None = None,
+    notes: Mapping[str, Any] | None = None,
+) -> tuple[PlaceModel, dict[str, float]]:
+    """Train a place model on given 360° scans (simulated, assembled along drives, or real).
+
+    Args:
+        scans: the examples; ``scans.ranges`` ``(N, config.n_beams)`` metres, ``scans.y`` names
+            (renamed by ``config.merge``; examples of classes outside ``classes`` are dropped).
+        config: boosting rounds, booster, order, features, scan parameters (``stride`` is only
+            recorded).
+        maps: labelled maps for the relaxation statistics and the correction thresholds (the
+            maps the scans came from, or any representative ones), already merged.
+        classes: the classes to learn (default: ``config.classes`` or those of ``scans.y``).
+        X: the ``(N, F)`` features of ``scans`` for ``config.features`` (or every default
+            feature) if already computed.
+        sample_weight: ``(N,)`` example weights (default: equal).
+
+    Returns the model and timings (seconds).
+    """
     t1 = time.perf_counter()
+    merge = dict(config.merge or {})
+    y = np.array([merge.get(c, c) for c in scans.y.tolist()], dtype=str) if merge else scans.y
+    cls = list(classes or config.classes or sorted(set(y.tolist())))
+    keep = np.isin(y, cls)
     names = list(config.features) if config.features is not None else default_feature_names()
-    X = features_of(scans, names, config.max_range, progress)
+    if X is None:
+        X = features_of(scans, names, config.max_range, progress)
+    if X.shape != (len(scans), len(names)):
+        raise ValueError(f"X must be ({len(scans)}, {len(names)}) features of the scans, got {X.shape}")
+    w = None if sample_weight is None else np.asarray(sample_weight, dtype=np.float64)[keep]
+    X, y = X[keep], y[keep]
     t2 = time.perf_counter()
     booster_cls = GeneralizedAdaBoost if config.booster == "generalized" else DiscreteAdaBoost
     factory = functools.partial(
         booster_cls, n_rounds=config.rounds, weak=config.weak, balanced=config.balanced
     )
-    order: str | tuple[str, ...] = config.order
-    dl = DecisionList(factory, order=order)
-    dl.fit(X, scans.y, classes=classes, progress=progress)
+    dl = DecisionList(factory, order=config.order)
+    dl.fit(X, y, classes=cls, sample_weight=w, progress=progress)
     t3 = time.perf_counter()
-    stats = relaxation_stats(maps, classes)
-    thresholds = correction_thresholds(maps, classes)
+    stats = relaxation_stats(maps, cls)
+    thresholds = correction_thresholds(maps, cls)
+    counts = {str(c): int(n) for c, n in zip(*np.unique(y, return_counts=True), strict=True)}
     model = PlaceModel.from_decision_list(
         dl,
         names,
         scan=ScanParams(n_beams=config.n_beams, max_range=config.max_range),
         data=DataSummary(
-            maps=tuple(m.name for m in maps),
-            examples_per_class=scans.class_counts(),
+            maps=tuple(dict.fromkeys([*scans.maps, *(m.name for m in maps)])),
+            examples_per_class=counts,
             stride=config.stride,
             notes={"config": config.as_json(), **dict(notes or {})},
         ),
         extras=stats.to_arrays(),
         extras_meta={
-            "relaxation": {"classes": list(classes), "resolution": [m.grid.resolution for m in maps]},
+            "relaxation": {"classes": list(cls), "resolution": [m.grid.resolution for m in maps]},
             "correction": {
                 "thresholds": thresholds.to_dict(),
                 "from": "thresholds_from_training (area-weighted quantile of the true regions)",
@@ -211,11 +261,4 @@ def train_place_model(
         },
     )
     t4 = time.perf_counter()
-    timings = {
-        "scans": t1 - t0,
-        "features": t2 - t1,
-        "boosting": t3 - t2,
-        "finish": t4 - t3,
-        "total": t4 - t0,
-    }
-    return model, timings
+    return model, {"features": t2 - t1, "boosting": t3 - t2, "finish": t4 - t3, "total": t4 - t1}

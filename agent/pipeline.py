@@ -20,7 +20,11 @@ scan's stamp (:mod:`agent.odom_sync`) and runs, in this order:
    resampled to the model's beams. The share of beams that are known, not interpolated, is
    the scan's :attr:`StepResult.coverage` (0.5 for a front laser right after start-up);
 3. the place model's histogram over the classes (probabilistic decision list, Sect. 4.3);
-   the label is its most probable class;
+3a. the trajectory HMM (Sect. 5.4, ``[places]``, on when the model carries one): the
+   histogram is the observation, Move when the laser has moved ``move_min`` since the last
+   Move, else Stay (:class:`~knowledge.places.hmm.HMMFilter`); the label is the most
+   probable class of the filtered belief (``vote = "filtered"``) or of the raw histogram
+   (``"raw"``), and it is what votes for navigation nodes;
 4. the doorway detector on the obstacle points around the robot (the local map's for a
    front laser, the scan's for a 360° laser);
 5. the navigation graph (Sect. 7.2.2): node dropping, last-N label window and majority
@@ -59,6 +63,7 @@ from knowledge.navigation.graph import DOORWAY, GraphParams, GraphUpdate, Naviga
 from knowledge.people.detector import LegDetector
 from knowledge.people.masking import fill_masked, person_beams, unknown_masked
 from knowledge.people.pipeline import PeopleFrame, PeoplePipeline
+from knowledge.places.hmm import HMMFilter
 from knowledge.places.model import PlaceModel
 from knowledge.topology.areas import AreaEvent, AreaMap
 
@@ -67,6 +72,7 @@ __all__ = [
     "PeopleParams",
     "Pipeline",
     "PipelineParams",
+    "PlaceFilterParams",
     "StepResult",
     "areas_message",
     "graph_message",
@@ -117,6 +123,28 @@ class PeopleParams:
         return self.enabled and self.mask
 
 
+#: Which histogram gives the label that is published and votes for navigation nodes.
+VOTES = ("filtered", "raw")
+
+
+@dataclass(frozen=True)
+class PlaceFilterParams:
+    """The place label along the trajectory (``[places]``).
+
+    Attributes:
+        hmm: filter the histograms with the model's HMM (Sect. 5.4) when it has one.
+        vote: the label published and voted for nodes: the filtered belief's class
+            ("filtered") or the raw histogram's ("raw"); without an HMM it is the raw one.
+    """
+
+    hmm: bool = True
+    vote: str = "filtered"
+
+    def __post_init__(self) -> None:
+        if self.vote not in VOTES:
+            raise ValueError(f"vote must be one of {VOTES}, got {self.vote!r}")
+
+
 @dataclass(frozen=True)
 class PipelineParams:
     """Everything besides the model that the pipeline's result depends on.
@@ -128,6 +156,7 @@ class PipelineParams:
         graph: the navigation graph (node distance d, label window N, ...).
         doorways: the doorway detector.
         people: people detection and masking.
+        places: the HMM filter of the place labels and which label votes.
     """
 
     mount: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -136,6 +165,7 @@ class PipelineParams:
     graph: GraphParams = field(default_factory=GraphParams)
     doorways: DoorwayParams = field(default_factory=DoorwayParams)
     people: PeopleParams = field(default_factory=PeopleParams)
+    places: PlaceFilterParams = field(default_factory=PlaceFilterParams)
 
     def __post_init__(self) -> None:
         m = tuple(float(v) for v in self.mount)
@@ -163,6 +193,7 @@ class PipelineParams:
             "graph": dataclass_table(self.graph),
             "doorways": dataclass_table(self.doorways),
             "people": dataclass_table(self.people),
+            "places": dataclass_table(self.places),
         }
 
     @classmethod
@@ -170,11 +201,12 @@ class PipelineParams:
         """The inverse of :meth:`to_table` (unknown keys are a ConfigError).
 
         A table without ``people`` was written before the pipeline detected people: people
-        are off, so a replay of an old recording builds the graph it built.
+        are off, so a replay of an old recording builds the graph it built; likewise a table
+        without ``places`` was written before the HMM filter: it is off.
         """
         from knowledge.errors import ConfigError
 
-        known = {"mount", "local_map", "rear_beams", "graph", "doorways", "people"}
+        known = {"mount", "local_map", "rear_beams", "graph", "doorways", "people", "places"}
         unknown = sorted(set(table) - known)
         if unknown:
             raise ConfigError(f"pipeline parameters: unknown key {unknown[0]!r}")
@@ -188,6 +220,7 @@ class PipelineParams:
             graph=build_dataclass(GraphParams, table.get("graph", {}), "graph"),
             doorways=build_dataclass(DoorwayParams, table.get("doorways", {}), "doorways"),
             people=build_dataclass(PeopleParams, table.get("people", {"enabled": False}), "people"),
+            places=build_dataclass(PlaceFilterParams, table.get("places", {"hmm": False}), "places"),
         )
 
 
@@ -200,8 +233,9 @@ class StepResult:
         pose: the laser's pose in the odometry frame at the scan's stamp.
         ranges: ``(n,)`` float32 the 360° scan the model classified (beam ``i`` at ``i·2π/n``
             from the laser's heading, metres).
-        label: the most probable class.
-        probabilities: class → probability (the model's histogram).
+        label: the class published and voted for nodes (``[places] vote``).
+        probabilities: class → probability of the histogram ``label`` comes from (the
+            filtered belief with ``vote = "filtered"`` and an HMM, else the model's histogram).
         doorway: a doorway the robot just passed through, or None.
         in_opening: the robot is inside a door-like opening now.
         update: what the navigation graph did.
@@ -210,6 +244,8 @@ class StepResult:
         masked: ``(B,)`` bool, the scan's beams hidden as people (None: nothing hidden).
         coverage: the share of ``ranges``' beams measured or hit in the local map (the rest
             are interpolated); below the graph's ``min_coverage`` the label did not vote.
+        raw_probabilities: class → probability, the model's histogram of this scan (eq. 4.5).
+        filtered: class → probability, the HMM's belief after this scan (None: no HMM).
     """
 
     scan: LaserScan
@@ -224,6 +260,14 @@ class StepResult:
     people: PeopleFrame | None = None
     masked: np.ndarray | None = None
     coverage: float = 1.0
+    raw_probabilities: Mapping[str, float] = field(default_factory=dict)
+    filtered: Mapping[str, float] | None = None
+
+    @property
+    def raw_label(self) -> str:
+        """The most probable class of the model's own histogram."""
+        raw = self.raw_probabilities or self.probabilities
+        return max(raw, key=lambda c: raw[c])
 
     @property
     def stamp(self) -> float:
@@ -293,6 +337,8 @@ class Pipeline:
             rear_beams=replace(prm.rear_beams, n_beams=model.scan.n_beams, max_range=model.scan.max_range),
         )
         self.classes = tuple(model.classes)
+        hmm = model.hmm if self.params.places.hmm else None
+        self.hmm: HMMFilter | None = HMMFilter(hmm) if hmm is not None else None
         self.local_map = LocalMap(self.params.local_map)
         pp = self.params.people
         self.people: PeoplePipeline | None = PeoplePipeline(people_detector) if pp.enabled else None
@@ -375,7 +421,9 @@ class Pipeline:
             )
             points = self.local_map.points_in_robot_frame(sensor)
         proba = np.clip(self.model.predict_proba_scans(ranges)[0], 0.0, 1.0)
-        label = self.classes[int(np.argmax(proba))]
+        belief = None if self.hmm is None else self.hmm.update(proba, (float(sensor[0]), float(sensor[1])))
+        voted = belief if belief is not None and self.params.places.vote == "filtered" else proba
+        label = self.classes[int(np.argmax(voted))]
         doorway = self.detector.update(points, sensor, scan.stamp)
         in_opening = self.detector.passing
         coverage = float(known.mean())
@@ -392,7 +440,7 @@ class Pipeline:
             ),
             ranges=ranges,
             label=label,
-            probabilities={c: float(p) for c, p in zip(self.classes, proba, strict=True)},
+            probabilities={c: float(p) for c, p in zip(self.classes, voted, strict=True)},
             doorway=doorway,
             in_opening=in_opening,
             update=upd,
@@ -400,6 +448,10 @@ class Pipeline:
             people=frame,
             masked=mask,
             coverage=coverage,
+            raw_probabilities={c: float(p) for c, p in zip(self.classes, proba, strict=True)},
+            filtered=None
+            if belief is None
+            else {c: float(p) for c, p in zip(self.classes, belief, strict=True)},
         )
 
     # ------------------------------------------------------------------ documents
@@ -503,7 +555,8 @@ def areas_message(document: Mapping[str, Any], stamp: float) -> dict[str, Any]:
 
 
 def place_message(result: StepResult) -> dict[str, Any]:
-    """The ``loci.place/1`` message of one step."""
+    """The ``loci.place/1`` message of one step: the label and its histogram, the model's raw
+    histogram and the HMM's filtered one (null without an HMM)."""
     return {
         "schema": "loci.place/1",
         "stamp": result.stamp,
@@ -511,4 +564,6 @@ def place_message(result: StepResult) -> dict[str, Any]:
         "probabilities": dict(result.probabilities),
         "node": result.node,
         "coverage": round(result.coverage, 4),
+        "raw_probabilities": dict(result.raw_probabilities or result.probabilities),
+        "filtered_probabilities": None if result.filtered is None else dict(result.filtered),
     }

@@ -109,9 +109,9 @@ def obj(
     )
 
 
-def mapping(values: Spec, *, description: str = "") -> Spec:
+def mapping(values: Spec, *, nullable: bool = False, description: str = "") -> Spec:
     """An object used as a map from any string key to values of one kind."""
-    return Spec("object", values=values, description=description)
+    return Spec("object", values=values, nullable=nullable, description=description)
 
 
 def _type_name(value: Any) -> str:
@@ -393,9 +393,18 @@ PLACE = MessageSchema(
                 description="share of the 360° scan's beams measured or hit in the local map "
                 "(the rest interpolated); below the graph's min_coverage the label does not vote",
             ),
+            "raw_probabilities": mapping(
+                _PROBABILITY, description="class → probability: the classifier's histogram of this scan"
+            ),
+            "filtered_probabilities": mapping(
+                _PROBABILITY,
+                nullable=True,
+                description="class → probability: the trajectory HMM's belief after this scan (null: no HMM)",
+            ),
         },
     ),
-    description="the place the robot is in now: the classifier's class and probabilities",
+    description="the place the robot is in now: the class that votes for navigation nodes and its "
+    "probabilities (the HMM's belief, or the classifier's histogram), and both histograms",
 )
 
 GRAPH = MessageSchema(

@@ -83,10 +83,11 @@ def test_likelihood_is_eq_5_4() -> None:
     arrays(np.bool_, (7,)),
 )
 def test_filtered_beliefs_are_distributions(raw: np.ndarray, moved: np.ndarray) -> None:
-    bel = fitted().filter(raw, moved)
-    assert bel.shape == (7, 3)
-    assert np.isfinite(bel).all() and (bel >= 0).all()
-    np.testing.assert_allclose(bel.sum(axis=1), 1.0, rtol=1e-9)
+    for observation in ("kl", "histogram"):
+        bel = fitted(observation=observation).filter(raw, moved)
+        assert bel.shape == (7, 3)
+        assert np.isfinite(bel).all() and (bel >= 0).all()
+        np.testing.assert_allclose(bel.sum(axis=1), 1.0, rtol=1e-9)
 
 
 @settings(max_examples=100, deadline=None)
@@ -103,8 +104,21 @@ def test_identity_transitions_and_uninformative_observations_keep_the_prior(
     np.testing.assert_allclose(bel, np.full((6, 3), 1 / 3), atol=1e-12)
 
 
-def test_a_steady_class_wins_and_one_outlier_does_not_flip_it() -> None:
-    hmm = fitted()
+def test_the_histogram_observation_model_is_the_tempered_histogram() -> None:
+    hmm = fitted(observation="histogram", temper=0.5, eps=0.0)
+    z = np.array([0.6, 0.3, 0.1])
+    np.testing.assert_allclose(hmm.likelihood(z), np.sqrt(z))
+    # with Stay and a uniform belief, one update is the normalised tempered histogram
+    np.testing.assert_allclose(hmm.step(hmm.prior_, z, moved=False), np.sqrt(z) / np.sqrt(z).sum())
+    with pytest.raises(ValueError, match="observation"):
+        PlaceHMM(observation="vibes").fit(
+            np.eye(3), np.array(CLASSES), classes=CLASSES, move_counts=np.eye(3)
+        )
+
+
+@pytest.mark.parametrize("observation", ["kl", "histogram"])
+def test_a_steady_class_wins_and_one_outlier_does_not_flip_it(observation: str) -> None:
+    hmm = fitted(observation=observation)
     room, corridor = np.array([0.8, 0.15, 0.05]), np.array([0.15, 0.8, 0.05])
     obs = np.array([room] * 10 + [corridor] + [room] * 3)
     bel = hmm.filter(obs, np.ones(len(obs), bool))

@@ -121,6 +121,33 @@ def load_fr079(data: Path) -> LabelledLog:
     return replace(log, label_image=img)
 
 
+def real_scans(log: LabelledLog, *, n_beams: int = 360, max_range: float = 30.0, name: str = "fr079") -> Any:
+    """The log's scans as the agent assembles them (front laser, sparse local map, rear beams;
+    people off), labelled: a :class:`~knowledge.places.dataset.ScanSet` of kind "real"."""
+    from knowledge.metric.rear_beams import FullScanParams
+    from knowledge.places.dataset import ScanSet
+    from knowledge.places.drives import assemble_along
+
+    angles = log.angle_min + np.arange(log.ranges.shape[1]) * log.angle_increment
+    ranges, _ = assemble_along(
+        log.ranges,
+        angles,
+        log.poses,
+        range_max=NO_ECHO,
+        stamps=log.stamps,
+        out=FullScanParams(n_beams=n_beams, max_range=max_range),
+    )
+    cells = np.round(log.to_pixels(log.poses[:, :2])[:, ::-1]).astype(np.int64)
+    return ScanSet(
+        ranges,
+        log.truth.astype(str),
+        np.zeros(len(log), dtype=np.int32),
+        cells,
+        (name,),
+        np.full(len(log), "real", dtype="<U16"),
+    )
+
+
 def node_truth(log: LabelledLog, xy: np.ndarray) -> np.ndarray:
     """``(k,)`` room/corridor truth of place-node positions ``(k, 2)`` (log frame): the label
     picture's class there, or of the nearest room/corridor pixel when it is a doorway or none."""
@@ -250,12 +277,19 @@ def main(argv: list[str] | None = None) -> int:
         "--data", type=Path, default=None, help="data folder (default $LOCI_DATA or ../shared/data)"
     )
     ap.add_argument("--people", action="store_true", help="people detection and masking on (default off)")
+    ap.add_argument("--no-hmm", action="store_true", help="do not filter with the model's HMM")
+    ap.add_argument(
+        "--vote", choices=("filtered", "raw"), default="filtered", help="the label that votes for nodes"
+    )
     ap.add_argument("--json", action="store_true", help="print one JSON object")
     args = ap.parse_args(argv)
     log = load_fr079(args.data or default_data_dir())
+    from agent.pipeline import PipelineParams, PlaceFilterParams
+
+    params = PipelineParams(places=PlaceFilterParams(hmm=not args.no_hmm, vote=args.vote))
     results = {}
     for path in args.model or [default_model_path()]:
-        results[str(path)] = evaluate(log, PlaceModel.load(path), people=args.people)
+        results[str(path)] = evaluate(log, PlaceModel.load(path), people=args.people, params=params)
     if args.json:
         print(json.dumps(results, indent=2))
         return 0

@@ -155,6 +155,11 @@ class ScanSet:
     def __len__(self) -> int:
         return int(self.y.shape[0])
 
+    @property
+    def kinds(self) -> np.ndarray:
+        """``(N,)`` how each scan was made ("" where unknown)."""
+        return self.kind if self.kind is not None else np.full(len(self), "", dtype="<U16")
+
     def subset(self, index: np.ndarray) -> ScanSet:
         """The scans selected by ``index`` (a boolean mask or integer indices)."""
         return ScanSet(
@@ -180,7 +185,7 @@ class ScanSet:
                     maps.append(name)
                 lut.append(maps.index(name))
             sources.append(np.asarray(lut, dtype=np.int32)[p.source] if len(p) else p.source.astype(np.int32))
-        kinds = [p.kind if p.kind is not None else np.full(len(p), "", dtype="<U16") for p in parts]
+        kinds = [p.kinds for p in parts]
         return ScanSet(
             np.concatenate([p.ranges for p in parts]),
             np.concatenate([p.y for p in parts]),

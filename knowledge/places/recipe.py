@@ -10,16 +10,17 @@ A :class:`Recipe` says, per labelled map, which kinds of training scans to make:
 * ``drive`` — the agent's 360° scans assembled from a front laser's scans along a simulated
   drive through each variant (:mod:`knowledge.places.drives`).
 
-:func:`recipe_scans` makes them for one map, deterministically from a seed (the map's index
-in the training set and the recipe's seed: a map's scans do not change when other maps are
-added). The caller concatenates maps (:meth:`ScanSet.concatenate`) and trains
-(:func:`~knowledge.places.training.train_on_scans`).
+:func:`recipe_scans` makes them for one map, deterministically from the recipe's seed and
+the map's name (a map's scans do not change when other maps are added or left out, so the
+folds of a leave-one-building-out evaluation share them). :func:`training_scans` makes
+them for many maps and adds real labelled scans; :func:`example_weights` weighs the kinds.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+import zlib
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -116,12 +117,15 @@ def _keep(s: ScanSet, recipe: Recipe) -> ScanSet:
     return s.subset(np.isin(s.y, list(recipe.classes)))
 
 
-def recipe_scans(
-    lmap: LabelledMap, recipe: Recipe, index: int = 0, *, progress: ProgressFn | None = None
-) -> ScanSet:
-    """The training scans of one labelled map (see the module doc); ``index`` is the map's
-    position in the training set, which with ``recipe.seed`` fixes its random choices."""
-    rng = np.random.default_rng([recipe.seed, index])
+def map_seed(name: str) -> int:
+    """A stable number of a map's name (CRC-32), which with the recipe's seed seeds its scans."""
+    return zlib.crc32(name.encode("utf-8"))
+
+
+def recipe_scans(lmap: LabelledMap, recipe: Recipe, *, progress: ProgressFn | None = None) -> ScanSet:
+    """The training scans of one labelled map (see the module doc), seeded by ``recipe.seed``
+    and the map's name."""
+    rng = np.random.default_rng([recipe.seed, map_seed(lmap.name)])
     parts = []
     if recipe.grid_stride:
         parts.append(_grid(lmap, recipe.grid_stride, recipe, "grid", None, lmap.name))
@@ -159,3 +163,37 @@ def recipe_scans(
     if not parts:
         raise ValueError("the recipe makes no scans: set grid_stride, variant_stride or drive_goals")
     return _keep(ScanSet.concatenate(parts), recipe)
+
+
+def training_scans(
+    maps: Sequence[LabelledMap],
+    recipe: Recipe,
+    *,
+    real: ScanSet | None = None,
+    progress: ProgressFn | None = None,
+    cache: Callable[[LabelledMap, Recipe], ScanSet] | None = None,
+) -> ScanSet:
+    """The recipe's scans of every map, plus ``real`` labelled scans (kind ``"real"``).
+
+    ``cache(lmap, recipe)``, when given, is called instead of :func:`recipe_scans` (a caller
+    keeping scans on disk between runs; it must return what ``recipe_scans`` would).
+    """
+    make = cache or (lambda m, r: recipe_scans(m, r))
+    parts = []
+    for i, m in enumerate(maps):
+        parts.append(make(m, recipe))
+        if progress is not None:
+            progress("training maps", i + 1, len(maps))
+    if real is not None and len(real):
+        kinds = np.full(len(real), "real", dtype="<U16")
+        parts.append(_keep(ScanSet(real.ranges, real.y, real.source, real.cells, real.maps, kinds), recipe))
+    return ScanSet.concatenate(parts)
+
+
+def example_weights(scans: ScanSet, weights: Mapping[str, float]) -> np.ndarray:
+    """``(N,)`` example weights by kind (kinds not named weigh 1)."""
+    table = {str(k): float(v) for k, v in weights.items()}
+    bad = [k for k, v in table.items() if not (math.isfinite(v) and v >= 0)]
+    if bad:
+        raise ValueError(f"weights must be finite and >= 0, got {bad}")
+    return np.array([table.get(str(k), 1.0) for k in scans.kinds.tolist()], dtype=np.float64)

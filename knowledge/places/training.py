@@ -262,3 +262,46 @@ def train_on_scans(
     )
     t4 = time.perf_counter()
     return model, {"features": t2 - t1, "boosting": t3 - t2, "finish": t4 - t3, "total": t4 - t1}
+
+
+def fit_trajectory_hmm(
+    model: PlaceModel,
+    observations: ScanSet,
+    maps: Sequence[LabelledMap],
+    *,
+    hmm: Any = None,
+    seed: int = 0,
+) -> PlaceModel:
+    """``model`` with a fitted trajectory HMM (Sect. 5.4) in it.
+
+    Args:
+        model: the place model.
+        observations: labelled 360° scans as the robot sees them (e.g. the ``drive`` scans of
+            a recipe); the model's histograms of them give each class's mean histogram.
+        maps: labelled maps (classes renamed as the model's) for the simulated Move transitions.
+        hmm: an unfitted :class:`~knowledge.places.hmm.PlaceHMM` with its parameters (default
+            the book's: m = 50, 1,000 moves of 20–50 cm).
+        seed: seeds the moves and the choice of the m observations.
+    """
+    from knowledge.places.hmm import PlaceHMM, move_transitions
+
+    est = hmm if hmm is not None else PlaceHMM()
+    classes = model.classes
+    codes = [lbl.CLASS_CODES[c] for c in classes]
+    rng = np.random.default_rng(seed)
+    counts = move_transitions(
+        [m.labels for m in maps],
+        [m.grid.resolution for m in maps],
+        [m.grid.free for m in maps],
+        codes,
+        rng,
+        n_moves=est.n_moves,
+        distance=est.distance,
+    )
+    keep = np.isin(observations.y, list(classes))
+    proba = np.empty((int(keep.sum()), len(classes)))
+    R = observations.ranges[keep]
+    for start in range(0, len(R), 8192):
+        proba[start : start + 8192] = model.predict_proba_scans(R[start : start + 8192])
+    est.fit(proba, observations.y[keep], classes=classes, move_counts=counts, rng=rng)
+    return model.with_hmm(est)

@@ -11,13 +11,14 @@ STAMP := $(VENV)/.installed-dev
 BENCH_STAMP := $(VENV)/.installed-bench
 OUT ?= out
 
-.PHONY: help install demo test lint typecheck unit eval bench clean
+.PHONY: help install demo test lint typecheck unit eval bench default-models clean
 
 help:
 	@echo "make demo   install (into .venv) and run the main job: loci demo"
 	@echo "make test   install and run lint, type checks and the tests"
 	@echo "make eval   leave-one-building-out evaluation on ../shared/data (long)"
 	@echo "make bench  benchmarks, as ratios against baselines run in the same process (long)"
+	@echo "make default-models  retrain the bundled place models on ../shared/data (long)"
 	@echo "make clean  remove .venv and outputs"
 
 $(STAMP): pyproject.toml
@@ -49,8 +50,11 @@ unit: $(STAMP)
 test: lint typecheck unit
 
 eval: $(STAMP)
-	$(BIN)/python -m agent.tools.evaluate_places --out docs/results
+	$(BIN)/python -m agent.tools.evaluate_places --out docs/results --quiet
 	$(BIN)/python -m agent.tools.evaluate_topology --out docs/results
+
+default-models: $(STAMP)
+	$(BIN)/loci places train-default --cache /tmp/loci-places-cache
 
 bench: $(BENCH_STAMP)
 	$(BIN)/python -m agent.tools.bench --out docs/results

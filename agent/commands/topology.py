@@ -178,7 +178,7 @@ def cmd_topology(args: argparse.Namespace) -> int:
     from agent.progress import Progress
     from knowledge import labels as lbl
     from knowledge.fileio import atomic_write_text, write_image
-    from knowledge.places.model import PlaceModel, default_model_path
+    from knowledge.places.model import PlaceModel, default_map_model_path
     from knowledge.places.topology_pipeline import TopologyConfig, build_topology
     from knowledge.topology.topomap import (
         draw_graph,
@@ -193,7 +193,7 @@ def cmd_topology(args: argparse.Namespace) -> int:
     if args.iterations < 0:
         raise SystemExit("loci places topology: --iterations must be >= 0")
     grid = load_map(args.map, args.resolution, args.free_grey)
-    model_path = args.model or default_model_path()
+    model_path = args.model or default_map_model_path()
     model = PlaceModel.load(model_path)
     config = TopologyConfig(
         iterations=args.iterations,

@@ -38,7 +38,7 @@ from knowledge.fileio import atomic_write_text
 from knowledge.labels import CORRIDOR, DOORWAY, ROOM
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.places.labeling import label_map
-from knowledge.places.model import PlaceModel, default_model_path
+from knowledge.places.model import PlaceModel, default_map_model_path
 from knowledge.places.relaxation import CompatibilityStats, argmax_labels, relax
 from knowledge.places.topology_pipeline import (
     histogram_image,
@@ -251,7 +251,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     model, name = None, ""
     if not args.synthetic:
-        path = args.model or default_model_path()
+        path = args.model or default_map_model_path()
         if path.is_file():
             model, name = PlaceModel.load(path), path.name
         elif args.model is not None:

@@ -221,6 +221,9 @@ class PlaceHMM:
         n_obs = np.zeros(K, dtype=np.int64)
         for i, c in enumerate(classes):
             rows = np.flatnonzero(names == c)
+            if rows.size == 0 and self.observation == "histogram":
+                means[i] = 1.0 / K  # not used by this observation model
+                continue
             if rows.size == 0:
                 raise ValueError(f"no observation of class {c!r} to learn its mean histogram from")
             if self.m is not None and rows.size > self.m:

@@ -386,5 +386,12 @@ def _from_header(p: Path, header: Mapping[str, Any], arrays: Mapping[str, npt.ND
 
 
 def default_model_path() -> Path:
-    """The bundled place model (trained on generated buildings; see docs/places.md)."""
+    """The bundled place model of the agent: the 360° scans it assembles from its laser and
+    its local map, with the trajectory HMM (``loci run``, ``loci replay``; docs/places.md)."""
     return Path(__file__).resolve().parent / "models" / "default.npz"
+
+
+def default_map_model_path() -> Path:
+    """The bundled place model for whole-map labeling (``loci places label``, ``loci places
+    topology``): 360° casts in occupancy maps, drawn or cluttered (docs/places.md)."""
+    return Path(__file__).resolve().parent / "models" / "default_map.npz"

@@ -107,6 +107,15 @@ def merge_classes(lmap: LabelledMap, merge: Mapping[str, str] | None) -> Labelle
     return LabelledMap(lmap.grid, lut[lmap.labels], names)
 
 
+def unlabel_classes(lmap: LabelledMap, names: Sequence[str]) -> LabelledMap:
+    """``lmap`` with the cells of the classes ``names`` unlabelled (free, but not trained on)."""
+    drop = [code for code, name in lmap.names.items() if name in set(names)]
+    if not drop:
+        return lmap
+    labels = np.where(np.isin(lmap.labels, drop), 0, lmap.labels).astype(np.uint8)
+    return LabelledMap(lmap.grid, labels, lmap.names)
+
+
 def features_of(
     scans: ScanSet, names: Sequence[str], max_range: float, progress: ProgressFn | None
 ) -> np.ndarray:
@@ -246,7 +255,11 @@ def train_on_scans(
         names,
         scan=ScanParams(n_beams=config.n_beams, max_range=config.max_range),
         data=DataSummary(
-            maps=tuple(dict.fromkeys([*scans.maps, *(m.name for m in maps)])),
+            maps=tuple(
+                dict.fromkeys(
+                    [*(scans.maps[int(i)] for i in np.unique(scans.source)), *(m.name for m in maps)]
+                )
+            ),
             examples_per_class=counts,
             stride=config.stride,
             notes={"config": config.as_json(), **dict(notes or {})},

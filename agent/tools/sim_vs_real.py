@@ -63,8 +63,11 @@ def _scores(model: PlaceModel, proba: np.ndarray, truth: np.ndarray) -> dict[str
     return {**scan_scores(truth, pred), **_confidence(model, proba, truth)}
 
 
-def measure(log: LabelledLog, data: Path, model: PlaceModel) -> dict[str, Any]:
-    """Everything ``sim_vs_real.md`` reports (see the module doc)."""
+def measure(
+    log: LabelledLog, data: Path, model: PlaceModel, others: dict[str, PlaceModel] | None = None
+) -> dict[str, Any]:
+    """Everything ``sim_vs_real.md`` reports (see the module doc); ``others`` adds a real-scan
+    row per named model."""
     s = float(log.align["m_per_px"])
     folder = data / "ipa" / "segmentation"
     fov = (log.ranges.shape[1] - 1) * log.angle_increment
@@ -89,6 +92,9 @@ def measure(log: LabelledLog, data: Path, model: PlaceModel) -> dict[str, Any]:
         )
     run = run_pipeline(log, model)
     out["accuracy"]["real: front scan, rear from the local map"] = _scores(model, run["proba"], log.truth)
+    for name, other in (others or {}).items():
+        P = other.predict_proba_scans(run["ranges360"])
+        out["accuracy"][f"real, {name} (no HMM)"] = _scores(other, P, log.truth)
     sim = casts["drawn"]
     no_echo = real >= NO_ECHO - 1e-3
     lengths = _runs(no_echo)
@@ -125,6 +131,50 @@ def measure(log: LabelledLog, data: Path, model: PlaceModel) -> dict[str, Any]:
         }
     out["per_class"] = per_class
     out["features"] = _feature_shift(log, run["ranges360"], sim["pipe"], model.scan.max_range)
+    out["randomised"] = _randomised_look(log, run["ranges360"], sim["pipe"], data, model.scan.max_range)
+    return out
+
+
+def _randomised_look(
+    log: LabelledLog, real360: np.ndarray, sim360: np.ndarray, data: Path, max_range: float
+) -> dict[str, Any]:
+    """How close the randomised training drives (of other buildings: Fr52 and lab_ipa, the
+    recipe of the bundled models) come to the real scans, against the drawn Freiburg 079:
+    jumps per scan and the KS statistic of the features that differed most."""
+    from scipy.stats import ks_2samp
+
+    from agent.tools.train_default import IPA_RECIPE
+    from knowledge.places.dataset import load_ipa_building
+    from knowledge.places.features import FeatureExtractor
+    from knowledge.places.recipe import recipe_scans
+
+    recipe = replace(IPA_RECIPE, grid_stride=0, variant_stride=0)
+    drives = [recipe_scans(load_ipa_building(data, b), recipe) for b in ("Fr52", "lab_ipa")]
+    names = sorted(
+        {
+            f["feature"]
+            for rows in _feature_shift(log, real360, sim360, max_range, top=6).values()
+            for f in rows
+        }
+    )
+    fx = FeatureExtractor(names, max_range=max_range)
+    Xr, Xs = np.asarray(fx(real360)), np.asarray(fx(sim360))
+    out: dict[str, Any] = {"features": names, "per_class": {}}
+    for c in ("room", "corridor"):
+        m = log.truth == c
+        R = np.concatenate([d.ranges[d.y == c] for d in drives])
+        Xd = np.asarray(fx(R))
+
+        def jumps(x: np.ndarray) -> float:
+            x = np.minimum(x, max_range)
+            return float(np.median((np.abs(np.diff(x, axis=1)) > JUMP).sum(axis=1)))
+
+        out["per_class"][c] = {
+            "scans_randomised": len(R),
+            "jumps": {"real": jumps(real360[m]), "drawn": jumps(sim360[m]), "randomised": jumps(R)},
+            "ks_drawn": [float(ks_2samp(Xr[m, j], Xs[m, j]).statistic) for j in range(len(names))],
+            "ks_randomised": [float(ks_2samp(Xr[m, j], Xd[:, j]).statistic) for j in range(len(names))],
+        }
     return out
 
 
@@ -278,6 +328,32 @@ def report(r: dict[str, Any], command: str, model_name: str) -> str:
         "5. Range noise and centimetre quantisation, people's legs near the robot, and other fields of view "
         "(180°, 270°, 360°) are cheap and make the model less tied to one sensor.",
     ]
+    rnd = r.get("randomised")
+    if rnd:
+        pc = rnd["per_class"]
+        lines += [
+            "",
+            "## After randomisation: training drives of other buildings against the real scans",
+            "",
+            "The same comparison for the drives the bundled models are trained on (`knowledge/places/randomize.py`, "
+            "`drives.py`: the recipe of `loci places train-default` in Fr52 and lab_ipa, two randomised variants "
+            "each, 360° scans assembled as the agent does), against the real Freiburg 079 scans. Jumps > 0.5 m per "
+            "360° scan, real / drawn Freiburg 079 / randomised drives: "
+            + "; ".join(
+                f"{c} {v['jumps']['real']:.0f} / {v['jumps']['drawn']:.0f} / {v['jumps']['randomised']:.0f} "
+                f"({v['scans_randomised']:,} drive scans)"
+                for c, v in pc.items()
+            )
+            + ".",
+            "",
+            "| feature | room: KS real vs drawn | room: KS real vs randomised | corridor: KS real vs drawn | corridor: KS real vs randomised |",
+            "| --- | ---: | ---: | ---: | ---: |",
+        ]
+        for j, name in enumerate(rnd["features"]):
+            lines.append(
+                f"| {name} | {pc['room']['ks_drawn'][j]:.2f} | {pc['room']['ks_randomised'][j]:.2f} | "
+                f"{pc['corridor']['ks_drawn'][j]:.2f} | {pc['corridor']['ks_randomised'][j]:.2f} |"
+            )
     return "\n".join(lines) + "\n"
 
 
@@ -292,6 +368,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--model", type=Path, default=None, help="place model (default: the bundled one)")
     ap.add_argument("--out", type=Path, default=Path("docs/results"), help="folder for sim_vs_real.md/.json")
+    ap.add_argument(
+        "--compare",
+        action="append",
+        default=[],
+        metavar="NAME=MODEL",
+        help="also score this model on the real scans (repeatable)",
+    )
     args = ap.parse_args(argv)
     data = args.data or default_data_dir()
     if not (data / "logs" / "fr079_labels_provisional.npz").is_file():
@@ -302,7 +385,13 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     model_path = args.model or default_model_path()
     model = PlaceModel.load(model_path)
-    result = measure(load_fr079(data), data, model)
+    others = {}
+    for item in args.compare:
+        name, sep, path = item.partition("=")
+        if not sep:
+            ap.error(f"--compare takes NAME=MODEL, got {item!r}")
+        others[name] = PlaceModel.load(path)
+    result = measure(load_fr079(data), data, model, others)
     result["seconds"] = time.perf_counter() - t0
     cmd = "python -m agent.tools.sim_vs_real " + " ".join(argv if argv is not None else sys.argv[1:])
     name = "the bundled model" if args.model is None else str(args.model)

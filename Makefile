@@ -15,7 +15,7 @@ OUT ?= out
 TEST_WORKERS ?= 2
 PYTEST := $(BIN)/pytest -n $(TEST_WORKERS) --dist loadfile
 
-.PHONY: help install demo test lint typecheck unit integration quick eval bench fuzz clean
+.PHONY: help install demo test lint typecheck unit integration quick eval bench fuzz default-models clean
 
 help:
 	@echo "make demo   install (into .venv) and run the main job: loci demo"
@@ -24,6 +24,7 @@ help:
 	@echo "make eval   leave-one-building-out and real-log evaluations on ../shared/data (long)"
 	@echo "make bench  benchmarks, as ratios against baselines run in the same process (long)"
 	@echo "make fuzz   reliability probes: a million SICK telegrams, 10,000 messages per bus key, 30 serial replugs (long)"
+	@echo "make default-models  retrain the bundled place models on ../shared/data (long)"
 	@echo "make clean  remove .venv and outputs"
 
 $(STAMP): pyproject.toml
@@ -68,12 +69,15 @@ quick: $(STAMP)
 	$(PYTEST) -m "not slow" -q
 
 eval: $(EVAL_STAMP)
-	$(BIN)/python -m tools.evaluate_places --out docs/results
+	$(BIN)/python -m tools.evaluate_places --out docs/results --quiet
 	$(BIN)/python -m tools.evaluate_topology --out docs/results
 	$(BIN)/python -m tools.evaluate_real_logs --out docs/results
 	$(BIN)/python -m tools.evaluate_localization --out docs/results
 	$(BIN)/python -m tools.evaluate_people_tracks --out docs/results
 	$(BIN)/python -m tools.evaluate_follow --seeds 0-7 --out docs/results
+
+default-models: $(STAMP)
+	$(BIN)/loci places train-default --cache /tmp/loci-places-cache
 
 bench: $(BENCH_STAMP)
 	$(BIN)/python -m tools.bench --out docs/results

@@ -209,15 +209,21 @@ class OdometryConfig(SyncParams):
 
 @dataclass(frozen=True)
 class PlacesConfig:
-    """``[places]``: ``model`` (a ``.npz`` path, or ``"default"`` for the bundled one) and
-    ``window``, the N last scan labels a node's majority vote counts."""
+    """``[places]``: ``model`` (a ``.npz`` path, or ``"default"`` for the bundled one),
+    ``window``, the N last scan labels a node's majority vote counts, ``hmm``, filter the
+    labels along the trajectory with the model's HMM (Sect. 5.4), and ``vote``, which label
+    is published and votes for nodes ("filtered" or "raw")."""
 
     model: str = field(default="default", metadata={"env": "LOCI_MODEL"})
     window: int = 10
+    hmm: bool = True
+    vote: str = "filtered"
 
     def __post_init__(self) -> None:
         if self.window < 1:
             raise ValueError(f"window must be >= 1 label, got {self.window}")
+        if self.vote not in ("filtered", "raw"):
+            raise ValueError(f"vote must be 'filtered' or 'raw', got {self.vote!r}")
 
     @property
     def model_path(self) -> Path:

@@ -167,9 +167,9 @@ def obj(
     )
 
 
-def mapping(values: Spec, *, description: str = "") -> Spec:
+def mapping(values: Spec, *, nullable: bool = False, description: str = "") -> Spec:
     """An object used as a map from any string key to values of one kind."""
-    return Spec("object", values=values, description=description)
+    return Spec("object", values=values, nullable=nullable, description=description)
 
 
 def _type_name(value: Any) -> str:

@@ -32,7 +32,7 @@ from knowledge.metric.grid import OccupancyGrid
 from knowledge.metric.raycast import reference_cast
 from knowledge.places.features.reference import reference_features
 from knowledge.places.labeling import label_map
-from knowledge.places.model import PlaceModel, default_model_path
+from knowledge.places.model import PlaceModel, default_map_model_path
 
 #: The C++ reference's time for lab_intel on this machine, one thread (from the issue).
 CPP_REFERENCE_SECONDS = 54.0
@@ -44,7 +44,7 @@ def run(data: Path | None = None, model_path: Path | None = None, *, sample: int
     if not path.is_file():
         raise SystemExit(f"{path} not found: pass --data or set LOCI_DATA")
     grid = OccupancyGrid.from_image(path, 0.05)
-    model = PlaceModel.load(model_path or default_model_path())
+    model = PlaceModel.load(model_path or default_map_model_path())
     n_free = int(grid.free.sum())
     # warm up: compile (or load from the cache) every kernel on a small slice
     label_map(grid, model, cells=grid.free_cells()[:64])

@@ -38,7 +38,7 @@ from agent.datasets import data_dir
 from knowledge.labels import CORRIDOR, DOORWAY, ROOM
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.places.labeling import label_map
-from knowledge.places.model import PlaceModel, default_model_path
+from knowledge.places.model import PlaceModel, default_map_model_path
 from knowledge.places.regions import CorrectionThresholds, correct_regions, extract_regions
 from knowledge.places.relaxation import CompatibilityStats, argmax_labels, relax
 from knowledge.topology.pipeline import (
@@ -255,7 +255,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     model, name = None, ""
     if not args.synthetic:
-        path = args.model or default_model_path()
+        path = args.model or default_map_model_path()
         if path.is_file():
             model, name = PlaceModel.load(path), path.name
         elif args.model is not None:

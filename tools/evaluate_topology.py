@@ -16,8 +16,9 @@
      lab_d_furnitures, lab_intel, lab_ipa, office_e), the leave-one-out model of part 1 that
      was trained without it; for the other eleven maps, a model trained on all five labelled
      buildings;
-   * ``synthetic``: a model trained on generated buildings only, by default the bundled
-     knowledge/places/models/default.npz (when it exists; ``--synthetic-model`` names another).
+   * ``synthetic``: by default the bundled map model knowledge/places/models/default_map.npz
+     (``--synthetic-model`` names another; it was a model of generated buildings only before the
+     bundled models were trained on the real maps too, see docs/places.md).
 
    Published (AdaBoost method of ipa_room_segmentation, Bormann et al. 2016): recall 89.2 % /
    precision 90.4 % without furniture, 85.1 % / 87.1 % with, 269 s per map.
@@ -49,7 +50,7 @@ from knowledge.labels import DOORWAY
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.places.dataset import IPA_BUILDINGS, LabelledMap, load_ipa_building
 from knowledge.places.labeling import MapLabels, class_codes, label_map
-from knowledge.places.model import PlaceModel, default_model_path
+from knowledge.places.model import PlaceModel, default_map_model_path
 from knowledge.places.regions import correct_regions
 from knowledge.places.training import TrainingConfig, train_place_model
 from knowledge.topology.pipeline import (
@@ -591,7 +592,7 @@ def main(argv: list[str] | None = None) -> int:
                     return key, loaded[key]
 
                 schemes["real"] = pick_real
-            synthetic_path: Path = args.synthetic_model or default_model_path()
+            synthetic_path: Path = args.synthetic_model or default_map_model_path()
             if "synthetic" in wanted and synthetic_path.is_file():
                 synthetic = PlaceModel.load(synthetic_path)
                 synthetic_name = "bundled default" if args.synthetic_model is None else synthetic_path.name

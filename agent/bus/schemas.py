@@ -90,9 +90,18 @@ PLACE = MessageSchema(
                 },
                 description="the laser's pose in the odometry frame at the scan's stamp",
             ),
+            "raw_probabilities": mapping(
+                _PROBABILITY, description="class → probability: the classifier's histogram of this scan"
+            ),
+            "filtered_probabilities": mapping(
+                _PROBABILITY,
+                nullable=True,
+                description="class → probability: the trajectory HMM's belief after this scan (null: no HMM)",
+            ),
         },
     ),
-    description="the place the robot is in now: the classifier's class and probabilities",
+    description="the place the robot is in now: the class that votes for navigation nodes and its "
+    "probabilities (the HMM's belief, or the classifier's histogram), and both histograms",
 )
 
 GRAPH = MessageSchema(

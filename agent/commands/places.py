@@ -237,6 +237,65 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     d.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     d.set_defaults(handler=cmd_demo)
 
+    td = psub.add_parser(
+        "train-default",
+        help="train the bundled models (the agent's and the map model) on all the labelled data",
+        description="Train the two bundled place models, reproducibly (fixed seeds), on the five labelled IPA "
+        "buildings, generated office floors and the real labelled Freiburg 079 scans, with domain "
+        "randomisation and simulated drives (docs/places.md, 'The bundled models'): default.npz for the "
+        "agent (loci run, loci replay; with the trajectory HMM) and default_map.npz for whole-map "
+        "labeling (loci places label, loci places topology). About 20 minutes on one core.",
+        epilog="Example: loci places train-default --cache /tmp/loci-places-cache\n"
+        "Leave a building out (to evaluate on it): --without fr079 --out-dir /tmp/models",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    td.add_argument(
+        "--data",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="the data folder (default: $LOCI_DATA or ../shared/data beside the repository)",
+    )
+    td.add_argument(
+        "--out-dir",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="where to write default.npz and default_map.npz (default: the bundled models' folder)",
+    )
+    td.add_argument(
+        "--without",
+        action="append",
+        default=[],
+        metavar="BUILDING",
+        help="leave a building out: fr079 or an IPA building (repeatable)",
+    )
+    td.add_argument(
+        "--generated", type=int, default=None, metavar="N", help="generated buildings (default 10)"
+    )
+    td.add_argument(
+        "--only",
+        choices=("agent", "map"),
+        default=None,
+        help="train only the agent's model or only the map model",
+    )
+    td.add_argument(
+        "--cache",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="keep the simulated training scans here and reuse them (e.g. /tmp/loci-places-cache)",
+    )
+    td.add_argument(
+        "--rounds",
+        type=int,
+        default=None,
+        metavar="T",
+        help="boosting rounds (default 100; fewer only to test)",
+    )
+    td.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    td.set_defaults(handler=cmd_train_default)
+
     register_topology_commands(psub)
 
 
@@ -244,9 +303,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 
 def _load_model(path: Path | None) -> Any:
-    from knowledge.places.model import PlaceModel, default_model_path
+    from knowledge.places.model import PlaceModel, default_map_model_path
 
-    return PlaceModel.load(path or default_model_path())
+    return PlaceModel.load(path or default_map_model_path())
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -304,6 +363,40 @@ def cmd_train(args: argparse.Namespace) -> int:
         + f"; total {timings['total']:.1f} s"
     )
     print(f"wrote {args.out}")
+    return 0
+
+
+def cmd_train_default(args: argparse.Namespace) -> int:
+    from agent.progress import Progress
+    from agent.training.default_models import GENERATED, train_default
+    from knowledge.places.model import default_model_path
+
+    data = args.data or data_dir()
+    if not (data / "ipa" / "labeled").is_dir():
+        raise SystemExit(
+            f"loci places train-default: {data}/ipa/labeled not found; pass --data DIR or set LOCI_DATA"
+        )
+    out_dir = args.out_dir or default_model_path().parent
+    which = (args.only,) if args.only else ("agent", "map")
+    with Progress(enabled=not args.quiet) as progress:
+        summary = train_default(
+            data,
+            out_dir,
+            without=args.without,
+            generated=GENERATED if args.generated is None else args.generated,
+            cache=args.cache,
+            which=which,
+            rounds=args.rounds,
+            progress=progress,
+        )
+    if args.json:
+        emit_json(summary)
+        return 0
+    print(f"trained on {len(summary['maps'])} buildings: {', '.join(summary['maps'])}")
+    print("examples: " + ", ".join(f"{k} {n:,}" for k, n in summary["examples_per_kind"].items()))
+    for kind, path in summary["files"].items():
+        print(f"wrote the {kind} model {path}")
+    print(f"took {summary['seconds']['total']:.0f} s")
     return 0
 
 
@@ -500,11 +593,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from knowledge.label_maps import label_map_yaml, legend_entries, with_legend
     from knowledge.learning.metrics import format_confusion, score
     from knowledge.places.labeling import label_map
-    from knowledge.places.model import PlaceModel, default_model_path
+    from knowledge.places.model import PlaceModel, default_map_model_path
     from sim.buildings import generate_tour_office
 
     t0 = time.perf_counter()
-    model = PlaceModel.load(args.model or default_model_path())
+    model = PlaceModel.load(args.model or default_map_model_path())
     building = generate_tour_office(args.seed)
     grid = building.grid
     if not args.json:

@@ -183,7 +183,7 @@ def cmd_topology(args: argparse.Namespace) -> int:
     from knowledge import labels as lbl
     from knowledge.fileio import atomic_write_text, write_image
     from knowledge.label_maps import label_map_yaml, legend_entries, with_legend, yaml_path
-    from knowledge.places.model import PlaceModel, default_model_path
+    from knowledge.places.model import PlaceModel, default_map_model_path
     from knowledge.topology.pipeline import TopologyConfig, build_topology
     from knowledge.topology.topomap import (
         draw_graph,
@@ -198,7 +198,7 @@ def cmd_topology(args: argparse.Namespace) -> int:
     if args.iterations < 0:
         raise SystemExit("loci places topology: --iterations must be >= 0")
     grid = load_map(args.map, args.resolution, args.free_grey)
-    model_path = args.model or default_model_path()
+    model_path = args.model or default_map_model_path()
     model = PlaceModel.load(model_path)
     config = TopologyConfig(
         iterations=args.iterations,

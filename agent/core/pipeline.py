@@ -28,7 +28,13 @@ scan's stamp (:mod:`agent.core.odom_sync`) and runs, in this order:
    resampled to the model's beams. The share of beams that are known, not interpolated, is
    the scan's :attr:`StepResult.coverage` (0.5 for a front laser right after start-up);
 3. the place model's histogram over the classes (probabilistic decision list, Sect. 4.3);
-   the label is its most probable class;
+3a. the trajectory HMM (Sect. 5.4, ``[places]``, on when the model carries one): the
+   histogram is the observation, Move when the laser has moved ``move_min`` since the last
+   Move, else Stay (:class:`~knowledge.learning.hmm.HMMFilter`); the label is the most
+   probable class of the filtered belief (``vote = "filtered"``) or of the raw histogram
+   (``"raw"``), and it is what votes for navigation nodes; a scan below the graph's
+   ``min_coverage`` is no observation (the belief stays; until the first observation the
+   raw histogram's class is the label);
 4. the doorway detector on the obstacle points around the robot (the local map's for a
    front laser, the scan's for a 360° laser);
 5. the navigation graph (Sect. 7.2.2): node dropping, last-N label window and majority
@@ -59,6 +65,7 @@ import numpy as np
 
 from agent.tables import build_dataclass, dataclass_table
 from drivers.messages import LaserScan, Pose2D
+from knowledge.learning.hmm import HMMFilter
 from knowledge.localization.scan_matching import MatchParams
 from knowledge.localization.tracking import PoseTracker, TrackingParams
 from knowledge.metric.local_map import LocalMap, LocalMapParams, beam_endpoints
@@ -81,6 +88,7 @@ __all__ = [
     "PeopleParams",
     "Pipeline",
     "PipelineParams",
+    "PlaceFilterParams",
     "StepResult",
     "areas_message",
     "graph_message",
@@ -138,6 +146,28 @@ class PeopleParams:
         return self.enabled and self.mask
 
 
+#: Which histogram gives the label that is published and votes for navigation nodes.
+VOTES = ("filtered", "raw")
+
+
+@dataclass(frozen=True)
+class PlaceFilterParams:
+    """The place label along the trajectory (``[places]``).
+
+    Attributes:
+        hmm: filter the histograms with the model's HMM (Sect. 5.4) when it has one.
+        vote: the label published and voted for nodes: the filtered belief's class
+            ("filtered") or the raw histogram's ("raw"); without an HMM it is the raw one.
+    """
+
+    hmm: bool = True
+    vote: str = "filtered"
+
+    def __post_init__(self) -> None:
+        if self.vote not in VOTES:
+            raise ValueError(f"vote must be one of {VOTES}, got {self.vote!r}")
+
+
 @dataclass(frozen=True)
 class PipelineParams:
     """Everything besides the model that the pipeline's result depends on.
@@ -150,6 +180,7 @@ class PipelineParams:
         doorways: the doorway detector.
         people: people detection and masking.
         localization: pose tracking by scan matching (None: trust the odometry).
+        places: the HMM filter of the place labels and which label votes.
     """
 
     mount: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -159,6 +190,7 @@ class PipelineParams:
     doorways: DoorwayParams = field(default_factory=DoorwayParams)
     people: PeopleParams = field(default_factory=PeopleParams)
     localization: TrackingParams | None = None
+    places: PlaceFilterParams = field(default_factory=PlaceFilterParams)
 
     def __post_init__(self) -> None:
         m = tuple(float(v) for v in self.mount)
@@ -176,6 +208,7 @@ class PipelineParams:
             doorways=config.doorways,
             people=PeopleParams(enabled=config.people.enabled, mask=config.people.mask),
             localization=config.localization.tracking_params(),
+            places=PlaceFilterParams(hmm=config.places.hmm, vote=config.places.vote),
         )
 
     def to_table(self) -> dict[str, Any]:
@@ -188,6 +221,7 @@ class PipelineParams:
             "graph": dataclass_table(self.graph),
             "doorways": dataclass_table(self.doorways),
             "people": dataclass_table(self.people),
+            "places": dataclass_table(self.places),
         }
 
     @classmethod
@@ -195,11 +229,12 @@ class PipelineParams:
         """The inverse of :meth:`to_table` (unknown keys are a ConfigError).
 
         A table without ``people`` was written before the pipeline detected people: people
-        are off, so a replay of an old recording builds the graph it built.
+        are off, so a replay of an old recording builds the graph it built; likewise a table
+        without ``places`` was written before the HMM filter: it is off.
         """
         from knowledge.errors import ConfigError
 
-        known = {"mount", "local_map", "rear_beams", "graph", "doorways", "people", "localization"}
+        known = {"mount", "local_map", "rear_beams", "graph", "doorways", "people", "localization", "places"}
         unknown = sorted(set(table) - known)
         if unknown:
             raise ConfigError(f"pipeline parameters: unknown key {unknown[0]!r}")
@@ -214,6 +249,7 @@ class PipelineParams:
             doorways=build_dataclass(DoorwayParams, table.get("doorways", {}), "doorways"),
             people=build_dataclass(PeopleParams, table.get("people", {"enabled": False}), "people"),
             localization=_tracking_from(table["localization"]) if table.get("localization") else None,
+            places=build_dataclass(PlaceFilterParams, table.get("places", {"hmm": False}), "places"),
         )
 
 
@@ -226,8 +262,9 @@ class StepResult:
         pose: the laser's pose in the odometry frame at the scan's stamp.
         ranges: ``(n,)`` float32 the 360° scan the model classified (beam ``i`` at ``i·2π/n``
             from the laser's heading, metres).
-        label: the most probable class.
-        probabilities: class → probability (the model's histogram).
+        label: the class published and voted for nodes (``[places] vote``).
+        probabilities: class → probability of the histogram ``label`` comes from (the
+            filtered belief with ``vote = "filtered"`` and an HMM, else the model's histogram).
         doorway: a doorway the robot just passed through, or None.
         in_opening: the robot is inside a door-like opening now.
         update: what the navigation graph did.
@@ -238,6 +275,8 @@ class StepResult:
             are interpolated); below the graph's ``min_coverage`` the label did not vote.
         correction: ``(3,)`` the map → odom transform of pose tracking (None: tracking off;
             ``pose`` is then in the odometry frame, else in ``map``).
+        raw_probabilities: class → probability, the model's histogram of this scan (eq. 4.5).
+        filtered: class → probability, the HMM's belief after this scan (None: no HMM).
     """
 
     scan: LaserScan
@@ -253,6 +292,14 @@ class StepResult:
     masked: np.ndarray | None = None
     coverage: float = 1.0
     correction: np.ndarray | None = None
+    raw_probabilities: Mapping[str, float] = field(default_factory=dict)
+    filtered: Mapping[str, float] | None = None
+
+    @property
+    def raw_label(self) -> str:
+        """The most probable class of the model's own histogram."""
+        raw = self.raw_probabilities or self.probabilities
+        return max(raw, key=lambda c: raw[c])
 
     @property
     def stamp(self) -> float:
@@ -322,6 +369,9 @@ class Pipeline:
             rear_beams=replace(prm.rear_beams, n_beams=model.scan.n_beams, max_range=model.scan.max_range),
         )
         self.classes = tuple(model.classes)
+        hmm = model.hmm if self.params.places.hmm else None
+        self.hmm: HMMFilter | None = HMMFilter(hmm) if hmm is not None else None
+        self._hmm_observed = False  # the filter has had a scan with enough coverage
         self.local_map = LocalMap(self.params.local_map)
         pp = self.params.people
         self.people: PeoplePipeline | None = PeoplePipeline(people_detector) if pp.enabled else None
@@ -431,10 +481,21 @@ class Pipeline:
             )
             points = self.local_map.points_in_robot_frame(sensor)
         proba = np.clip(self.model.predict_proba_scans(ranges)[0], 0.0, 1.0)
-        label = self.classes[int(np.argmax(proba))]
+        coverage = float(known.mean())
+        belief: np.ndarray | None = None
+        if self.hmm is not None:
+            # A scan too little of which is measured does not vote for nodes, and it is no
+            # observation for the HMM either (half of it is interpolated: "a small room").
+            if coverage >= self.graph.params.min_coverage:
+                belief = self.hmm.update(proba, (float(sensor[0]), float(sensor[1])))
+                self._hmm_observed = True
+            else:
+                belief = np.asarray(self.hmm.belief)
+        use_belief = self._hmm_observed and self.params.places.vote == "filtered"
+        voted = belief if belief is not None and use_belief else proba
+        label = self.classes[int(np.argmax(voted))]
         doorway = self.detector.update(points, sensor, scan.stamp)
         in_opening = self.detector.passing
-        coverage = float(known.mean())
         upd = self.graph.update(
             sensor, label, doorway, in_opening=in_opening, ranges=ranges, coverage=coverage, known=known
         )
@@ -448,7 +509,7 @@ class Pipeline:
             ),
             ranges=ranges,
             label=label,
-            probabilities={c: float(p) for c, p in zip(self.classes, proba, strict=True)},
+            probabilities={c: float(p) for c, p in zip(self.classes, voted, strict=True)},
             doorway=doorway,
             in_opening=in_opening,
             update=upd,
@@ -457,6 +518,10 @@ class Pipeline:
             masked=mask,
             coverage=coverage,
             correction=correction,
+            raw_probabilities={c: float(p) for c, p in zip(self.classes, proba, strict=True)},
+            filtered=None
+            if belief is None
+            else {c: float(p) for c, p in zip(self.classes, belief, strict=True)},
         )
 
     # ------------------------------------------------------------------ documents
@@ -568,7 +633,8 @@ def areas_message(document: Mapping[str, Any], stamp: float) -> dict[str, Any]:
 
 
 def place_message(result: StepResult) -> dict[str, Any]:
-    """The ``loci.place/1`` message of one step."""
+    """The ``loci.place/1`` message of one step: the label and its histogram, the model's raw
+    histogram and the HMM's filtered one (null without an HMM)."""
     return {
         "schema": "loci.place/1",
         "stamp": result.stamp,
@@ -581,4 +647,6 @@ def place_message(result: StepResult) -> dict[str, Any]:
             "y": round(result.pose.y, 4),
             "theta": round(result.pose.theta, 5),
         },
+        "raw_probabilities": dict(result.raw_probabilities or result.probabilities),
+        "filtered_probabilities": None if result.filtered is None else dict(result.filtered),
     }

@@ -142,6 +142,7 @@ class ScanSet:
         source: ``(N,)`` index into ``maps`` of the map each scan came from.
         cells: ``(N, 2)`` (row, col) of each scan in its map.
         maps: names of the maps.
+        kind: ``(N,)`` how each scan was made (e.g. "grid", "drive", "real"), or None.
     """
 
     ranges: np.ndarray
@@ -149,9 +150,50 @@ class ScanSet:
     source: np.ndarray
     cells: np.ndarray
     maps: tuple[str, ...]
+    kind: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.y.shape[0])
+
+    @property
+    def kinds(self) -> np.ndarray:
+        """``(N,)`` how each scan was made ("" where unknown)."""
+        return self.kind if self.kind is not None else np.full(len(self), "", dtype="<U16")
+
+    def subset(self, index: np.ndarray) -> ScanSet:
+        """The scans selected by ``index`` (a boolean mask or integer indices)."""
+        return ScanSet(
+            self.ranges[index],
+            self.y[index],
+            self.source[index],
+            self.cells[index],
+            self.maps,
+            None if self.kind is None else self.kind[index],
+        )
+
+    @staticmethod
+    def concatenate(parts: Sequence[ScanSet]) -> ScanSet:
+        """One set of all ``parts``' scans (their maps listed once each, in order)."""
+        if not parts:
+            raise ValueError("nothing to concatenate")
+        maps: list[str] = []
+        sources = []
+        for p in parts:
+            lut = []
+            for name in p.maps:
+                if name not in maps:
+                    maps.append(name)
+                lut.append(maps.index(name))
+            sources.append(np.asarray(lut, dtype=np.int32)[p.source] if len(p) else p.source.astype(np.int32))
+        kinds = [p.kinds for p in parts]
+        return ScanSet(
+            np.concatenate([p.ranges for p in parts]),
+            np.concatenate([p.y for p in parts]),
+            np.concatenate(sources),
+            np.concatenate([p.cells for p in parts]),
+            tuple(maps),
+            np.concatenate(kinds).astype("<U16"),
+        )
 
     def class_counts(self) -> dict[str, int]:
         names, counts = np.unique(self.y, return_counts=True)

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
@@ -40,6 +40,8 @@ from knowledge.learning.weak import FloatArray
 from knowledge.npzfile import read_npz, write_npz
 
 FORMAT = "loci.place-model/1"
+#: Extras holding the trajectory HMM (Sect. 5.4): arrays ``extra.hmm_<name>``, metadata ``extras_meta["hmm"]``.
+HMM_PREFIX = "hmm_"
 FORMAT_FAMILY = "loci.place-model/"
 RETRAIN = "retrain it with 'loci places train'"
 DL_PREFIX = "dl."
@@ -194,6 +196,44 @@ class PlaceModel:
         """Class names in the column order of the probabilities."""
         return tuple(self.decision_list.classes_.tolist())
 
+    # -- the trajectory HMM (Sect. 5.4) ---------------------------------------------------
+
+    @property
+    def hmm(self) -> Any:
+        """The model's :class:`~knowledge.learning.hmm.PlaceHMM`, or None if it has none.
+
+        Raises:
+            ModelError: the stored HMM is damaged or does not match the classes.
+        """
+        from knowledge.learning.hmm import PlaceHMM
+
+        meta = self.extras_meta.get("hmm")
+        if not meta:
+            return None
+        arrays = {k[len(HMM_PREFIX) :]: v for k, v in self.extras.items() if k.startswith(HMM_PREFIX)}
+        try:
+            hmm = PlaceHMM.from_arrays(meta, arrays)
+        except (ValueError, TypeError, KeyError) as exc:
+            raise ModelError(
+                f"the model's HMM is damaged ({exc}): refit it ('loci places hmm') or retrain"
+            ) from exc
+        if tuple(hmm.classes_.tolist()) != self.classes:
+            raise ModelError(
+                f"the model's HMM is over the classes {hmm.classes_.tolist()}, the model's are {list(self.classes)}: refit it"
+            )
+        return hmm
+
+    def with_hmm(self, hmm: Any) -> PlaceModel:
+        """A copy of this model carrying the fitted ``hmm`` (over the same classes), replacing any."""
+        meta, arrays = hmm.to_arrays()
+        if tuple(meta["classes"]) != self.classes:
+            raise ValueError(
+                f"the HMM is over {meta['classes']}, the model's classes are {list(self.classes)}"
+            )
+        extras = {k: v for k, v in self.extras.items() if not k.startswith(HMM_PREFIX)}
+        extras.update({HMM_PREFIX + k: np.asarray(v) for k, v in arrays.items()})
+        return replace(self, extras=extras, extras_meta={**self.extras_meta, "hmm": meta})
+
     # -- prediction ---------------------------------------------------------------------
 
     def predict_proba_features(self, X_used: npt.ArrayLike) -> FloatArray:
@@ -325,7 +365,7 @@ def _from_header(p: Path, header: Mapping[str, Any], arrays: Mapping[str, npt.ND
     try:
         scan = ScanParams(**dict(header["scan"]))
         dl = DecisionList.from_state(dict(header["decision_list"]), dl_arrays)
-        return PlaceModel(
+        model = PlaceModel(
             feature_names=tuple(names),
             decision_list=dl,
             scan=scan,
@@ -338,8 +378,20 @@ def _from_header(p: Path, header: Mapping[str, Any], arrays: Mapping[str, npt.ND
         raise ModelError(
             f"{p}: the model is inconsistent ({exc}); it is damaged or was edited: retrain it"
         ) from exc
+    try:
+        model.hmm  # noqa: B018 - checks the stored HMM now rather than at first use
+    except ModelError as exc:
+        raise ModelError(f"{p}: {exc}") from exc
+    return model
 
 
 def default_model_path() -> Path:
-    """The bundled place model (trained on generated buildings; see docs/places.md)."""
+    """The bundled place model of the agent: the 360° scans it assembles from its laser and
+    its local map, with the trajectory HMM (``loci run``, ``loci replay``; docs/places.md)."""
     return Path(__file__).resolve().parent / "models" / "default.npz"
+
+
+def default_map_model_path() -> Path:
+    """The bundled place model for whole-map labeling (``loci places label``, ``loci places
+    topology``): 360° casts in occupancy maps, drawn or cluttered (docs/places.md)."""
+    return Path(__file__).resolve().parent / "models" / "default_map.npz"

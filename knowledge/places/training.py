@@ -107,6 +107,15 @@ def merge_classes(lmap: LabelledMap, merge: Mapping[str, str] | None) -> Labelle
     return LabelledMap(lmap.grid, lut[lmap.labels], names)
 
 
+def unlabel_classes(lmap: LabelledMap, names: Sequence[str]) -> LabelledMap:
+    """``lmap`` with the cells of the classes ``names`` unlabelled (free, but not trained on)."""
+    drop = [code for code, name in lmap.names.items() if name in set(names)]
+    if not drop:
+        return lmap
+    labels = np.where(np.isin(lmap.labels, drop), 0, lmap.labels).astype(np.uint8)
+    return LabelledMap(lmap.grid, labels, lmap.names)
+
+
 def features_of(
     scans: ScanSet, names: Sequence[str], max_range: float, progress: ProgressFn | None
 ) -> np.ndarray:
@@ -153,6 +162,25 @@ def train_place_model(
     """Train a place model on labelled maps. Returns the model and timings (seconds)."""
     t0 = time.perf_counter()
     maps = [merge_classes(m, config.merge) for m in maps]
+    classes = _classes(maps, config)
+    scans = simulate_scans(
+        maps,
+        stride=config.stride,
+        n_beams=config.n_beams,
+        max_range=config.max_range,
+        classes=classes,
+        progress=progress,
+    )
+    t1 = time.perf_counter()
+    model, timings = train_on_scans(scans, config, maps=maps, classes=classes, progress=progress, notes=notes)
+    return model, {
+        "scans": t1 - t0,
+        **{k: v for k, v in timings.items() if k != "total"},
+        "total": time.perf_counter() - t0,
+    }
+
+
+def _classes(maps: Sequence[LabelledMap], config: TrainingConfig) -> list[str]:
     present: list[str] = []
     for m in maps:
         for name in m.class_counts():
@@ -169,41 +197,76 @@ def train_place_model(
     missing = [c for c in classes if c not in present]
     if missing:
         raise ValueError(f"classes {missing} have no labelled cells in the training maps")
-    scans = simulate_scans(
-        maps,
-        stride=config.stride,
-        n_beams=config.n_beams,
-        max_range=config.max_range,
-        classes=classes,
-        progress=progress,
-    )
+    return classes
+
+
+def train_on_scans(
+    scans: ScanSet,
+    config: TrainingConfig,
+    *,
+    maps: Sequence[LabelledMap],
+    classes: Sequence[str] | None = None,
+    X: np.ndarray | None = None,
+    sample_weight: np.ndarray | None = None,
+    progress: ProgressFn | None = None,
+    notes: Mapping[str, Any] | None = None,
+) -> tuple[PlaceModel, dict[str, float]]:
+    """Train a place model on given 360° scans (simulated, assembled along drives, or real).
+
+    Args:
+        scans: the examples; ``scans.ranges`` ``(N, config.n_beams)`` metres, ``scans.y`` names
+            (renamed by ``config.merge``; examples of classes outside ``classes`` are dropped).
+        config: boosting rounds, booster, order, features, scan parameters (``stride`` is only
+            recorded).
+        maps: labelled maps for the relaxation statistics and the correction thresholds (the
+            maps the scans came from, or any representative ones), already merged.
+        classes: the classes to learn (default: ``config.classes`` or those of ``scans.y``).
+        X: the ``(N, F)`` features of ``scans`` for ``config.features`` (or every default
+            feature) if already computed.
+        sample_weight: ``(N,)`` example weights (default: equal).
+
+    Returns the model and timings (seconds).
+    """
     t1 = time.perf_counter()
+    merge = dict(config.merge or {})
+    y = np.array([merge.get(c, c) for c in scans.y.tolist()], dtype=str) if merge else scans.y
+    cls = list(classes or config.classes or sorted(set(y.tolist())))
+    keep = np.isin(y, cls)
     names = list(config.features) if config.features is not None else default_feature_names()
-    X = features_of(scans, names, config.max_range, progress)
+    if X is None:
+        X = features_of(scans, names, config.max_range, progress)
+    if X.shape != (len(scans), len(names)):
+        raise ValueError(f"X must be ({len(scans)}, {len(names)}) features of the scans, got {X.shape}")
+    w = None if sample_weight is None else np.asarray(sample_weight, dtype=np.float64)[keep]
+    X, y = X[keep], y[keep]
     t2 = time.perf_counter()
     booster_cls = GeneralizedAdaBoost if config.booster == "generalized" else DiscreteAdaBoost
     factory = functools.partial(
         booster_cls, n_rounds=config.rounds, weak=config.weak, balanced=config.balanced
     )
-    order: str | tuple[str, ...] = config.order
-    dl = DecisionList(factory, order=order)
-    dl.fit(X, scans.y, classes=classes, progress=progress)
+    dl = DecisionList(factory, order=config.order)
+    dl.fit(X, y, classes=cls, sample_weight=w, progress=progress)
     t3 = time.perf_counter()
-    stats = relaxation_stats(maps, classes)
-    thresholds = correction_thresholds(maps, classes)
+    stats = relaxation_stats(maps, cls)
+    thresholds = correction_thresholds(maps, cls)
+    counts = {str(c): int(n) for c, n in zip(*np.unique(y, return_counts=True), strict=True)}
     model = PlaceModel.from_decision_list(
         dl,
         names,
         scan=ScanParams(n_beams=config.n_beams, max_range=config.max_range),
         data=DataSummary(
-            maps=tuple(m.name for m in maps),
-            examples_per_class=scans.class_counts(),
+            maps=tuple(
+                dict.fromkeys(
+                    [*(scans.maps[int(i)] for i in np.unique(scans.source)), *(m.name for m in maps)]
+                )
+            ),
+            examples_per_class=counts,
             stride=config.stride,
             notes={"config": config.as_json(), **dict(notes or {})},
         ),
         extras=stats.to_arrays(),
         extras_meta={
-            "relaxation": {"classes": list(classes), "resolution": [m.grid.resolution for m in maps]},
+            "relaxation": {"classes": list(cls), "resolution": [m.grid.resolution for m in maps]},
             "correction": {
                 "thresholds": thresholds.to_dict(),
                 "from": "thresholds_from_training (area-weighted quantile of the true regions)",
@@ -211,11 +274,47 @@ def train_place_model(
         },
     )
     t4 = time.perf_counter()
-    timings = {
-        "scans": t1 - t0,
-        "features": t2 - t1,
-        "boosting": t3 - t2,
-        "finish": t4 - t3,
-        "total": t4 - t0,
-    }
-    return model, timings
+    return model, {"features": t2 - t1, "boosting": t3 - t2, "finish": t4 - t3, "total": t4 - t1}
+
+
+def fit_trajectory_hmm(
+    model: PlaceModel,
+    observations: ScanSet,
+    maps: Sequence[LabelledMap],
+    *,
+    hmm: Any = None,
+    seed: int = 0,
+) -> PlaceModel:
+    """``model`` with a fitted trajectory HMM (Sect. 5.4) in it.
+
+    Args:
+        model: the place model.
+        observations: labelled 360° scans as the robot sees them (e.g. the ``drive`` scans of
+            a recipe); the model's histograms of them give each class's mean histogram.
+        maps: labelled maps (classes renamed as the model's) for the simulated Move transitions.
+        hmm: an unfitted :class:`~knowledge.learning.hmm.PlaceHMM` with its parameters (default
+            the book's: m = 50, 1,000 moves of 20–50 cm).
+        seed: seeds the moves and the choice of the m observations.
+    """
+    from knowledge.learning.hmm import PlaceHMM, move_transitions
+
+    est = hmm if hmm is not None else PlaceHMM()
+    classes = model.classes
+    codes = [lbl.CLASS_CODES[c] for c in classes]
+    rng = np.random.default_rng(seed)
+    counts = move_transitions(
+        [m.labels for m in maps],
+        [m.grid.resolution for m in maps],
+        [m.grid.free for m in maps],
+        codes,
+        rng,
+        n_moves=est.n_moves,
+        distance=est.distance,
+    )
+    keep = np.isin(observations.y, list(classes))
+    proba = np.empty((int(keep.sum()), len(classes)))
+    R = observations.ranges[keep]
+    for start in range(0, len(R), 8192):
+        proba[start : start + 8192] = model.predict_proba_scans(R[start : start + 8192])
+    est.fit(proba, observations.y[keep], classes=classes, move_counts=counts, rng=rng)
+    return model.with_hmm(est)

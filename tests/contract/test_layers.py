@@ -39,6 +39,7 @@ RANKS: tuple[tuple[str, ...], ...] = (
     # the agent: the pure core first, then the runtime
     ("agent.base",),
     ("agent.core",),
+    ("agent.training",),  # the bundled place models: generated buildings, the real log through core
     ("agent.bus",),
     ("agent.recording", "agent.live"),
     ("agent.ros2",),

@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from agent.core.pipeline import PeopleParams, Pipeline, PipelineParams
+from agent.core.pipeline import PeopleParams, Pipeline, PipelineParams, PlaceFilterParams
 from drivers.messages import LaserScan, Pose2D
 from knowledge.people.detector import LegDetector, SegmentDetection
 from knowledge.people.masking import fill_masked, free_standing, person_beams, unknown_masked
@@ -199,7 +199,9 @@ def follow_drive(tour: TourWorld, model: PlaceModel, laser: str, people: PeopleP
         return (x, y, math.atan2(b[1] - a[1], b[0] - a[0]) if t > 0 else tour.start[2])
 
     world = LmsWorld(tour.grid, pose, tutor.legs(), noise_std=0.01, seed=tour.seed)
-    pipeline = Pipeline(model, PipelineParams(people=people))
+    # a front laser's nodes vote with the classifier's own labels (see test_tour.drive)
+    places = PlaceFilterParams(vote="raw") if laser == "front" else PlaceFilterParams()
+    pipeline = Pipeline(model, PipelineParams(people=people, places=places))
     for k in range(int((tutor.length - FOLLOW_DISTANCE) / speed * rate) + 1):
         t = k / rate
         if laser == "front":
@@ -229,7 +231,7 @@ def test_masking_the_tutor_makes_the_tours_places_right_and_keeps_both_doorways(
     masked = follow_drive(tour, model, laser, PeopleParams())
     (r0, n0), (r1, n1) = node_accuracy(tour, plain), node_accuracy(tour, masked)
     print(f"{laser}: unmasked {r0}/{n0}, masked {r1}/{n1} place nodes right")
-    assert r1 / n1 >= r0 / n0 + 0.2  # measured: 7/15 → 12/15 (360°), 6/15 → 15/15 (front)
+    assert r1 / n1 >= r0 / n0 + 0.2  # measured: 8/13 → 11/13 (360°, filtered), 7/12 → 10/12 (front, raw)
     assert r1 / n1 >= 0.75
     doors = masked.graph.doorway_nodes()
     assert len(doors) == 2

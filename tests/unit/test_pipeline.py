@@ -298,3 +298,71 @@ def test_people_come_with_every_step_and_the_parameters_round_trip() -> None:
         PipelineParams.from_table({"people": {"doorways": "sometimes"}})
     with pytest.raises(ValueError, match="margin"):
         PeopleParams(margin=-1)
+
+
+def test_the_hmm_filters_the_labels_and_both_histograms_are_published(
+    model: PlaceModel, drive: Drive
+) -> None:
+    """With a model that carries an HMM (Sect. 5.4) the label comes from the filtered belief;
+    the raw histogram is still there, equal to a pipeline's without the HMM."""
+    from agent.core.pipeline import PlaceFilterParams
+    from knowledge.errors import ConfigError
+    from knowledge.learning.hmm import PlaceHMM
+
+    K = len(model.classes)
+    means = np.full((K, K), 0.1 / (K - 1)) + np.eye(K) * (0.9 - 0.1 / (K - 1))
+    counts = np.eye(K) * 500 + 10
+    hmm = PlaceHMM(m=None).fit(means, np.array(model.classes), classes=model.classes, move_counts=counts)
+    with_hmm = model.with_hmm(hmm)
+    laser_scans = scans(drive, "front")
+    off = PipelineParams(people=PeopleParams(enabled=False))
+    plain = Pipeline(
+        with_hmm, PipelineParams(people=PeopleParams(enabled=False), places=PlaceFilterParams(hmm=False))
+    )
+    filtered = Pipeline(with_hmm, off)
+    raw_vote = Pipeline(
+        with_hmm, PipelineParams(people=PeopleParams(enabled=False), places=PlaceFilterParams(vote="raw"))
+    )
+    a, b, c = [], [], []
+    for i in range(len(laser_scans)):
+        odom = Pose2D(*map(float, drive.poses[i]), stamp=laser_scans[i].stamp)
+        a.append(plain.process(laser_scans[i], odom))
+        b.append(filtered.process(laser_scans[i], odom))
+        c.append(raw_vote.process(laser_scans[i], odom))
+    assert all(r.filtered is None for r in a) and all(r.filtered is not None for r in b)
+    min_coverage = filtered.graph.params.min_coverage
+    observed, previous, skipped = False, None, 0
+    for x, y, z in zip(a, b, c, strict=True):
+        assert y.raw_probabilities == pytest.approx(x.probabilities)
+        assert y.filtered is not None and sum(y.filtered.values()) == pytest.approx(1.0)
+        if y.coverage < min_coverage:
+            # a scan that does not vote is no observation: the belief stays as it was
+            skipped += 1
+            if previous is None:
+                assert y.filtered == pytest.approx(dict.fromkeys(model.classes, 1 / K))
+            else:
+                assert y.filtered == pytest.approx(previous)
+        observed = observed or y.coverage >= min_coverage
+        if observed:
+            assert y.label == max(y.filtered, key=lambda k: y.filtered[k])  # type: ignore[index]
+        else:  # before the first observation the label is the histogram's own
+            assert y.label == y.raw_label
+        assert z.label == x.label == y.raw_label  # vote = "raw" publishes the raw label
+        previous = y.filtered
+    assert skipped > 0 and observed  # the front laser's first scans are half interpolated
+    # filtering removes flickering: fewer label changes along the drive
+    flips = [sum(p.label != q.label for p, q in itertools.pairwise(rs)) for rs in (a, b)]
+    assert flips[1] <= flips[0]
+    message = place_message(b[-1])
+    SCHEMAS.validate(message, "loci.place/1")
+    assert message["filtered_probabilities"] == pytest.approx(b[-1].filtered)
+    assert message["raw_probabilities"] == pytest.approx(a[-1].probabilities)
+    assert place_message(a[-1])["filtered_probabilities"] is None
+    SCHEMAS.validate(place_message(a[-1]), "loci.place/1")
+    # parameters round-trip; a recording's table from before the filter means no filter
+    params = PipelineParams(places=PlaceFilterParams(vote="raw"))
+    assert PipelineParams.from_table(params.to_table()) == params
+    old = {k: v for k, v in PipelineParams().to_table().items() if k != "places"}
+    assert PipelineParams.from_table(old).places.hmm is False
+    with pytest.raises(ConfigError, match="vote"):
+        PipelineParams.from_table({"places": {"vote": "loudest"}})

@@ -21,7 +21,7 @@ from knowledge.places.dataset import (
 )
 from knowledge.places.labeling import class_codes, label_map
 from knowledge.places.model import PlaceModel
-from knowledge.places.training import TrainingConfig, merge_classes, train_place_model
+from knowledge.places.training import TrainingConfig, merge_classes, train_place_model, unlabel_classes
 from sim.buildings import generate_building
 
 FAST = TrainingConfig(stride=10, rounds=12, n_beams=90, classes=("room", "corridor", "doorway"))
@@ -81,6 +81,11 @@ def test_merging_classes_renames_labels() -> None:
     lm = merge_classes(LabelledMap(b.grid, b.labels), {"hallway": "corridor"})
     assert "hallway" not in lm.class_counts()
     assert lm.class_counts()["corridor"] == int(np.isin(b.labels, (lbl.CORRIDOR, lbl.HALLWAY)).sum())
+    # or the halls are left out: free, but no longer labelled (nothing is trained on them)
+    out = unlabel_classes(LabelledMap(b.grid, b.labels), ["hallway"])
+    assert "hallway" not in out.class_counts() and (out.labels[b.labels == lbl.HALLWAY] == 0).all()
+    assert out.class_counts()["corridor"] == int((b.labels == lbl.CORRIDOR).sum())
+    assert unlabel_classes(lm, ["kitchen"]) is lm
 
 
 def test_trained_model_labels_every_free_cell(model: PlaceModel, buildings: list[LabelledMap]) -> None:

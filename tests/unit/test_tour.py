@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from agent.bus.schemas import INTENT_KINDS
-from agent.core.pipeline import Pipeline
+from agent.core.pipeline import Pipeline, PipelineParams, PlaceFilterParams
 from drivers.messages import LaserScan, Pose2D
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.people.pipeline import PeoplePipeline
@@ -148,7 +148,12 @@ class DriveResult:
 def drive(tour: TourWorld, model: PlaceModel, folder: Path, laser: str) -> DriveResult:
     """Drive the follow path with a SimRobot; feed the pipeline 360° scans or front-LMS views."""
     robot = robot_for(tour, folder, tour.follow_path())
-    pipeline = Pipeline(model)
+    # With a front laser the nodes vote with the classifier's own labels: from the standing
+    # start, the trajectory HMM carries the first scans' "room" (an ambiguous histogram at the
+    # tour's dead end) through 2 m of corridor, 8 of 12 nodes right against 11 of 12 raw
+    # (docs/places.md, "The trajectory HMM", known limits); the 360° drive filters.
+    params = PipelineParams(places=PlaceFilterParams(vote="raw")) if laser == "front" else PipelineParams()
+    pipeline = Pipeline(model, params)
     scans: list[LaserScan] = []
     robot.scan_listeners.append(scans.append)
     front = LmsWorld(robot.grid, lambda _t: robot.sensor_pose, noise_std=0.01, seed=3)

@@ -97,7 +97,8 @@ def _table(rows: list[dict[str, Any]]) -> list[str]:
 
 
 class Models:
-    """Held-out models: trained on demand by the default recipe, kept in ``folder``."""
+    """Held-out models: trained on demand by the default recipe, kept in ``folder`` and reused
+    as they are (after changing the recipe or the training code, empty the folder)."""
 
     def __init__(self, data: Path, folder: Path, cache: Path | None, generated: int, progress: Any) -> None:
         self.data, self.folder, self.cache, self.generated, self.progress = (
@@ -271,8 +272,8 @@ def lobo_markdown(rows: list[dict[str, Any]], fit: dict[str, Any] | None, comman
         md += [
             "## Leave one building out: the map model trained without the building it labels",
             "",
-            "Trained by the recipe of `loci places train-default` (the other four IPA buildings, generated "
-            "buildings, randomised variants; docs/places.md) with `--without BUILDING`.",
+            "Trained by the map model's recipe of `loci places train-default` (the other four IPA buildings: "
+            "clean casts, randomised variants, drives; docs/places.md) with `--without BUILDING`.",
             "",
             *_table(rows),
             "",
@@ -326,7 +327,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ap.add_argument("--out", type=Path, default=Path("docs/results"), help="folder for the tables")
     ap.add_argument(
-        "--models", type=Path, default=Path("out/places-eval"), help="held-out models (trained when missing)"
+        "--models",
+        type=Path,
+        default=Path("out/places-eval"),
+        help="held-out models (trained when missing, else reused: empty it after changing the recipe)",
     )
     ap.add_argument(
         "--cache", type=Path, default=Path("/tmp/loci-places-cache"), help="simulated training scans, reused"

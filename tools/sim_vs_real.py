@@ -399,7 +399,13 @@ def main(argv: list[str] | None = None) -> int:
     result = measure(load_fr079(data), data, model, others)
     result["seconds"] = time.perf_counter() - t0
     cmd = "python -m tools.sim_vs_real " + " ".join(argv if argv is not None else sys.argv[1:])
-    name = "the bundled model" if args.model is None else str(args.model)
+    name = "the bundled agent model" if args.model is None else str(args.model)
+    if "fr079" in model.data.maps:
+        name += (
+            " — it was trained on these very scans, so its real-scan rows are not building-disjoint: "
+            "pass --model with a model trained --without fr079"
+        )
+        print(f"warning: {name}", file=sys.stderr)
     args.out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(
         args.out / "sim_vs_real.json", json.dumps({"command": cmd.strip(), **result}, indent=2) + "\n"

@@ -179,7 +179,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "confusion matrix, and every decision-list order's accuracy (the book's Tables 3.1-3.3).",
     )
     _add_map_sources(e, required_hint="at least one")
-    e.add_argument("--model", type=Path, default=None, help="a place model (default: the bundled one)")
+    e.add_argument(
+        "--model",
+        type=Path,
+        default=None,
+        help="a place model (default: the bundled map model, default_map.npz)",
+    )
     e.add_argument("--stride", type=int, default=1, help="evaluate every STRIDE-th cell (default 1: all)")
     e.add_argument(
         "--merge",
@@ -199,7 +204,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     la.add_argument("map", type=Path, metavar="MAP", help="map_server YAML, or an image with --resolution")
     la.add_argument("--resolution", type=float, metavar="M", help="metres per cell for image maps")
-    la.add_argument("--model", type=Path, default=None, help="a place model (default: the bundled one)")
+    la.add_argument(
+        "--model",
+        type=Path,
+        default=None,
+        help="a place model (default: the bundled map model, default_map.npz)",
+    )
     la.add_argument(
         "--out",
         type=Path,
@@ -233,7 +243,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="the folder to write into (default out/places-demo; --out is the old name)",
     )
     d.add_argument("--seed", type=int, default=7, help="seed of the generated office floor (default 7)")
-    d.add_argument("--model", type=Path, default=None, help="a place model (default: the bundled one)")
+    d.add_argument(
+        "--model",
+        type=Path,
+        default=None,
+        help="a place model (default: the bundled map model, default_map.npz)",
+    )
     d.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     d.set_defaults(handler=cmd_demo)
 

@@ -62,7 +62,12 @@ def register_topology_commands(psub: argparse._SubParsersAction[argparse.Argumen
         help="for image maps: cells with grey value >= G are free, all others occupied "
         "(the IPA segmentation maps: 250); default: map_server thresholds",
     )
-    t.add_argument("--model", type=Path, default=None, help="a place model (default: the bundled one)")
+    t.add_argument(
+        "--model",
+        type=Path,
+        default=None,
+        help="a place model (default: the bundled map model, default_map.npz)",
+    )
     t.add_argument(
         "--out-dir", type=Path, required=True, metavar="DIR", help="the folder to write the outputs into"
     )

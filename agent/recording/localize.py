@@ -106,7 +106,9 @@ def collect_run(
         stamps.append(result.stamp)
         pose = result.pose
         odom.append(np.array([pose.x, pose.y, pose.theta]))
-        proba.append(list(result.probabilities.values()))
+        # the classifier's own histogram (eq. 6.3 wants it), not the trajectory HMM's belief
+        raw = result.raw_probabilities or result.probabilities
+        proba.append(list(raw.values()))
 
     out = replay_recording(p, model=model, params=params, on_step=on_step, progress=progress)
     pipeline = out.pipeline

@@ -19,7 +19,8 @@ Training data: the five labelled IPA buildings (``DATA/ipa/labeled``), ``--gener
 procedurally generated office floors (seeds 1000, 1001, ...; their open halls unlabelled), and the labelled Freiburg 079
 log (``DATA/logs/fr079_labels_provisional.npz``), through the recipes of
 :mod:`knowledge.places.recipe`. Everything is seeded: the same data and version give the same
-files. ``--without`` leaves buildings out (``fr079`` or an IPA building), which is how the
+models (the header's training date aside); the scan cache is keyed by the map, the recipe
+and the source of the code that makes the scans. ``--without`` leaves buildings out (``fr079`` or an IPA building), which is how the
 evaluations train models that never saw the building they score.
 
 Run: ``loci places train-default`` (or ``make default-models``); about 20 minutes on one core.
@@ -90,9 +91,36 @@ class TrainingSet:
         return [m.name for m in self.maps]
 
 
+def _code_digest() -> bytes:
+    """The source of the modules that make the training scans: a change there is a new cache
+    entry, not a silently reused old scan."""
+    import knowledge.metric.local_map
+    import knowledge.metric.raycast
+    import knowledge.metric.rear_beams
+    import knowledge.places.dataset
+    import knowledge.places.drives
+    import knowledge.places.randomize
+    import knowledge.places.recipe
+
+    h = hashlib.sha1()
+    for mod in (
+        knowledge.metric.local_map,
+        knowledge.metric.raycast,
+        knowledge.metric.rear_beams,
+        knowledge.places.dataset,
+        knowledge.places.drives,
+        knowledge.places.randomize,
+        knowledge.places.recipe,
+    ):
+        h.update(Path(str(mod.__file__)).read_bytes())
+    return h.digest()
+
+
 def _key(lmap: LabelledMap, recipe: Recipe) -> str:
-    """The recipe's and the map's contents, hashed (a changed map or recipe is a new entry)."""
+    """The recipe's and the map's contents and the scan-making code, hashed (a changed map,
+    recipe or code is a new entry)."""
     h = hashlib.sha1(json.dumps(recipe.as_json(), sort_keys=True, default=str).encode())
+    h.update(_code_digest())
     h.update(np.ascontiguousarray(lmap.grid.state).tobytes())
     h.update(np.ascontiguousarray(lmap.labels).tobytes())
     h.update(repr(lmap.grid.resolution).encode())

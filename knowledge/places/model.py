@@ -215,7 +215,7 @@ class PlaceModel:
             hmm = PlaceHMM.from_arrays(meta, arrays)
         except (ValueError, TypeError, KeyError) as exc:
             raise ModelError(
-                f"the model's HMM is damaged ({exc}): refit it ('loci places hmm') or retrain"
+                f"the model's HMM is damaged ({exc}): retrain the model (loci places train-default, or loci places train)"
             ) from exc
         if tuple(hmm.classes_.tolist()) != self.classes:
             raise ModelError(

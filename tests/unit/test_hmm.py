@@ -222,3 +222,15 @@ def test_the_hmm_travels_in_the_model_file(tmp_path: Path) -> None:
     other = PlaceHMM(m=None).fit(np.eye(2), np.array(["a", "b"]), classes=("a", "b"), move_counts=np.eye(2))
     with pytest.raises(ValueError, match="classes"):
         model.with_hmm(other)
+
+
+def test_stored_parameters_out_of_range_are_refused_on_loading() -> None:
+    hmm = fitted(observation="histogram")
+    meta, arrays = hmm.to_arrays()
+    again = PlaceHMM.from_arrays(meta, arrays)
+    assert again.get_params() == hmm.get_params()
+    np.testing.assert_allclose(again.move_, hmm.move_)
+    # a misspelt observation used to load and fall back to eq. 5.4 without a word
+    bad = {**meta, "params": {**meta["params"], "observation": "histgram"}}
+    with pytest.raises(ValueError, match="observation"):
+        PlaceHMM.from_arrays(bad, arrays)

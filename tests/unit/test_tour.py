@@ -145,15 +145,13 @@ class DriveResult:
     collisions: int
 
 
-def drive(tour: TourWorld, model: PlaceModel, folder: Path, laser: str) -> DriveResult:
-    """Drive the follow path with a SimRobot; feed the pipeline 360° scans or front-LMS views."""
+def drive(
+    tour: TourWorld, model: PlaceModel, folder: Path, laser: str, vote: str = "filtered"
+) -> DriveResult:
+    """Drive the follow path with a SimRobot; feed the pipeline 360° scans or front-LMS views;
+    ``vote`` is the ``[places] vote`` (the shipped default: the HMM's belief)."""
     robot = robot_for(tour, folder, tour.follow_path())
-    # With a front laser the nodes vote with the classifier's own labels: from the standing
-    # start, the trajectory HMM carries the first scans' "room" (an ambiguous histogram at the
-    # tour's dead end) through 2 m of corridor, 8 of 12 nodes right against 11 of 12 raw
-    # (docs/places.md, "The trajectory HMM", known limits); the 360° drive filters.
-    params = PipelineParams(places=PlaceFilterParams(vote="raw")) if laser == "front" else PipelineParams()
-    pipeline = Pipeline(model, params)
+    pipeline = Pipeline(model, PipelineParams(places=PlaceFilterParams(vote=vote)))
     scans: list[LaserScan] = []
     robot.scan_listeners.append(scans.append)
     front = LmsWorld(robot.grid, lambda _t: robot.sensor_pose, noise_std=0.01, seed=3)
@@ -177,7 +175,11 @@ def drive(tour: TourWorld, model: PlaceModel, folder: Path, laser: str) -> Drive
 def test_following_the_tutor_builds_the_tours_graph(
     tour: TourWorld, model: PlaceModel, tmp_path: Path, laser: str
 ) -> None:
-    result = drive(tour, model, tmp_path, laser)
+    # With a front laser the graph is checked with the classifier's own labels voting: from
+    # the standing start the trajectory HMM carries the first scans' "room" (an ambiguous
+    # histogram at the tour's dead end) through 2 m of corridor (docs/places.md, "The
+    # trajectory HMM", known limit); what ships is checked against its measured level below.
+    result = drive(tour, model, tmp_path, laser, vote="raw" if laser == "front" else "filtered")
     assert result.collisions == 0
     g = result.pipeline.graph
     # node accuracy against the ground truth areas (doorway nodes excluded)
@@ -188,6 +190,11 @@ def test_following_the_tutor_builds_the_tours_graph(
     accuracy = right / len(place)
     print(f"{laser}: {right}/{len(place)} place nodes right ({100 * accuracy:.0f} %)")
     assert accuracy >= 0.75
+    if laser == "front":  # as shipped ([places] vote = "filtered"): measured 8 of 12
+        shipped = drive(tour, model, tmp_path / "shipped", laser).pipeline.graph.place_nodes()
+        ok = sum(n.label == a.label for n in shipped if (a := tour.area_at(n.xy, margin=0.2)) is not None)
+        print(f"front, as shipped: {ok}/{len(shipped)} place nodes right")
+        assert ok / len(shipped) >= 0.65
     corridor_nodes = {k for k, a in truth.items() if a is not None and a.name == "corridor"}
     room_nodes = {k for k, a in truth.items() if a is not None and a.name == "living room"}
     assert len(corridor_nodes) >= 6 and len(room_nodes) >= 4

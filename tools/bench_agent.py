@@ -48,7 +48,7 @@ import threading
 import time
 import tracemalloc
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -76,6 +76,8 @@ LAST_READ = 64
 ROBOT = "bench"
 #: Seconds the agent may still be busy after a step's last scan for the rate to count as sustained.
 MAX_LAG = 0.1
+#: Seconds between stamping a step's scans and feeding the first of them.
+STAMP_LEAD = 0.02
 #: Scan rates the sustained-rate sweep tries, scans per second.
 RATES = (37.5, 75.0, 150.0, 300.0, 450.0, 600.0, 800.0, 1000.0, 1300.0, 1600.0, 2000.0)
 
@@ -231,6 +233,7 @@ class RateProbe:
         self.agent = agent
         self.drive = drive
         self.sent = 0
+        self._t0 = 0.0  # the stamp of the next feed's first scan (wall clock)
         self.session = open_session(BusConfig(listen=(), connect=tuple(agent.endpoints)))
         self.pub_scan = publish_stream(self.session, ROBOT, "scan")
         self.pub_odom = publish_stream(self.session, ROBOT, "odom")
@@ -248,16 +251,28 @@ class RateProbe:
         processed = self.agent.pipeline.scans if self.agent.pipeline is not None else 0
         return Counters(self.sent, scan.get("received", 0), dropped, processed)
 
-    def encode(self, n: int) -> list[tuple[bytes, bytes]]:
+    def encode(self, n: int, rate: float) -> list[tuple[bytes, bytes]]:
+        """The next ``n`` scans and their odometry, stamped as a laser running at ``rate``
+        from the moment :meth:`feed` starts: stamps follow the wall clock of the feed, as a
+        real sensor's do (scans stamped ahead of their arrival are refused by the agent's
+        odometry sync, ``future_stamp``, so the drive's own 37.5 Hz stamps cannot be sent
+        faster than that)."""
         chunk = self.drive.take(n)
+        self._t0 = time.time() + STAMP_LEAD
         out = []
         for i in range(n):
-            scan = self.drive.scan(chunk, i)
-            out.append((POSE_CODEC.encode(chunk.odom[i]), LASER_SCAN_CODEC.encode(scan)))
+            stamp = self._t0 + i / rate
+            scan = replace(self.drive.scan(chunk, i), stamp=stamp)
+            odom = replace(chunk.odom[i], stamp=stamp)
+            out.append((POSE_CODEC.encode(odom), LASER_SCAN_CODEC.encode(scan)))
         return out
 
     def feed(self, payloads: list[tuple[bytes, bytes]], rate: float) -> float:
-        """Publish at ``rate`` scans per second; returns the rate achieved."""
+        """Publish at ``rate`` scans per second, the first when its stamp comes (see
+        :meth:`encode`); returns the rate achieved."""
+        wait = self._t0 - time.time()
+        if wait > 0:
+            time.sleep(wait)
         t0 = time.perf_counter()
         for i, (odom, scan) in enumerate(payloads):
             delay = t0 + i / rate - time.perf_counter()
@@ -284,7 +299,7 @@ class RateProbe:
         return moved
 
     def step(self, rate: float, seconds: float) -> dict[str, Any]:
-        payloads = self.encode(max(10, round(rate * seconds)))
+        payloads = self.encode(max(10, round(rate * seconds)), rate)
         before = self.counters()
         t0 = time.perf_counter()
         achieved = self.feed(payloads, rate)
@@ -364,7 +379,7 @@ def bench_rate(
 
 def _sweep(probe: RateProbe, rates: Sequence[float], step: float, refine: int) -> dict[str, Any]:
     # a slow start so the subscriptions are in place before anything counts
-    probe.feed(probe.encode(40), 20.0)
+    probe.feed(probe.encode(40, 20.0), 20.0)
     if not wait_until(lambda: probe.counters().processed >= 20, 10.0):
         raise RuntimeError("the agent processes no scans from the bus")
     probe.settle()

@@ -186,11 +186,12 @@ def semantic_map(grid: OccupancyGrid, work: Path, name: str) -> tuple[np.ndarray
     if cache.is_file():
         with np.load(cache, allow_pickle=False) as z:
             return z["labels"], legend, float(z["seconds"])
-    from knowledge.places.model import PlaceModel, default_model_path
+    from knowledge.places.model import PlaceModel, default_map_model_path
     from knowledge.topology.pipeline import build_topology
 
     t0 = time.perf_counter()
-    res = build_topology(grid, PlaceModel.load(default_model_path()))
+    # labelling a map is the map model's job (the agent's model classifies its own scans)
+    res = build_topology(grid, PlaceModel.load(default_map_model_path()))
     seconds = time.perf_counter() - t0
     np.savez(cache, labels=res.corrected, seconds=np.float64(seconds))
     return res.corrected, {int(k): v for k, v in res.class_names.items()}, seconds

@@ -326,17 +326,7 @@ def read_annotations(
                 f"{src}: no {topic} topic of type {PERSON_TYPE}"
                 + (f"; Person topics: {have}" if have else "")
             )
-        scans = sorted(t for t, c in conns.items() if c.msgtype == "sensor_msgs/msg/LaserScan")
-        if scan_topic is None:
-            if len(scans) != 1:
-                raise DataError(
-                    f"{src}: choose the scan topic (LaserScan topics: {', '.join(scans) or 'none'})"
-                )
-            scan_topic = scans[0]
-        elif scan_topic not in scans:
-            raise DataError(
-                f"{src}: {scan_topic} is not a LaserScan topic (those: {', '.join(scans) or 'none'})"
-            )
+        scan_topic = _scan_topic(src, conns, scan_topic)
         store = get_typestore(Stores.ROS1_NOETIC)
         store.register(get_types_from_msg(ann.msgdef.data, ann.msgtype))
         scan_times, scan_stamps, frame_ids = [], [], set()
@@ -498,17 +488,7 @@ def read_bag_scans(path: str | Path, *, scan_topic: str | None = None) -> list[A
         raise DataError(f"{src}: cannot open as a ROS 1 bag: {exc}") from exc
     try:
         conns = {c.topic: c for c in reader.connections}
-        scans = sorted(t for t, c in conns.items() if c.msgtype == "sensor_msgs/msg/LaserScan")
-        if scan_topic is None:
-            if len(scans) != 1:
-                raise DataError(
-                    f"{src}: choose the scan topic (LaserScan topics: {', '.join(scans) or 'none'})"
-                )
-            scan_topic = scans[0]
-        elif scan_topic not in scans:
-            raise DataError(
-                f"{src}: {scan_topic} is not a LaserScan topic (those: {', '.join(scans) or 'none'})"
-            )
+        scan_topic = _scan_topic(src, conns, scan_topic)
         store = get_typestore(Stores.ROS1_NOETIC)
         out = []
         for n, (conn, _, raw) in enumerate(reader.messages(connections=[conns[scan_topic]]), start=1):
@@ -569,3 +549,16 @@ def bag_examples(
         raise DataError(f"{path}: no scan in the window {window[0]:g}-{window[1]:g} s after the first scan")
     X, y, dist = np.concatenate(Xs), np.concatenate(ys), np.concatenate(ds)
     return X, y, dist, {"scans": used, "people": int(y.sum()), "non_people": int((~y).sum())}
+
+
+def _scan_topic(src: Path, conns: dict[str, Any], wanted: str | None) -> str:
+    """The bag's LaserScan topic: ``wanted`` if it is one, else the only one (DataError naming
+    the choices otherwise)."""
+    scans = sorted(t for t, c in conns.items() if c.msgtype == "sensor_msgs/msg/LaserScan")
+    if wanted is None:
+        if len(scans) != 1:
+            raise DataError(f"{src}: choose the scan topic (LaserScan topics: {', '.join(scans) or 'none'})")
+        return scans[0]
+    if wanted not in scans:
+        raise DataError(f"{src}: {wanted} is not a LaserScan topic (those: {', '.join(scans) or 'none'})")
+    return wanted

@@ -63,6 +63,20 @@ def _node_positions(graph: Mapping[str, Any]) -> dict[int, tuple[float, float]]:
     return {int(n["id"]): (float(n["x"]), float(n["y"])) for n in graph.get("nodes", ())}
 
 
+def area_centroids(
+    areas: Mapping[str, Any], graph: Mapping[str, Any]
+) -> list[tuple[Mapping[str, Any], float, float]]:
+    """Each area of a ``loci.areas/1`` message with the centroid of its nodes in ``graph``
+    (``loci.graph/1``); nodes missing from the graph are ignored, an area with none is left out."""
+    pos = _node_positions(graph)
+    out = []
+    for area in areas.get("areas", ()):
+        xy = [pos[int(n)] for n in area.get("nodes", ()) if int(n) in pos]
+        if xy:
+            out.append((area, sum(p[0] for p in xy) / len(xy), sum(p[1] for p in xy) / len(xy)))
+    return out
+
+
 def graph_scene(
     graph: Mapping[str, Any], *, frame_id: str = "odom", stamp: float | None = None
 ) -> fg.SceneUpdate:
@@ -113,14 +127,8 @@ def areas_scene(
     area with none of its nodes in the graph is not drawn.
     """
     when = _stamp(areas.get("stamp", 0.0) if stamp is None else stamp)
-    pos = _node_positions(graph)
     texts = []
-    for area in areas.get("areas", ()):
-        xy = [pos[int(n)] for n in area.get("nodes", ()) if int(n) in pos]
-        if not xy:
-            continue
-        cx = sum(p[0] for p in xy) / len(xy)
-        cy = sum(p[1] for p in xy) / len(xy)
+    for area, cx, cy in area_centroids(areas, graph):
         label = area.get("label")
         texts.append(
             fg.TextPrimitive(

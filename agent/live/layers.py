@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from foxglove import messages as fg
 
-from agent.bus.scene import class_rgba
+from agent.bus.scene import area_centroids, class_rgba
 from knowledge.labels import CLASS_COLORS_BGR
 from knowledge.metric.grid import FREE, OCCUPIED, OccupancyGrid
 
@@ -159,14 +159,8 @@ def named_areas_scene(
     frame_id: str = ODOM,
 ) -> fg.SceneUpdate:
     """Entity ``areas``: per area ``"<class> #<id>"`` and, below it, its names, over its nodes' centroid."""
-    pos = {int(n["id"]): (float(n["x"]), float(n["y"])) for n in graph.get("nodes", ())}
     texts = []
-    for area in areas.get("areas", ()):
-        xy = [pos[int(n)] for n in area.get("nodes", ()) if int(n) in pos]
-        if not xy:
-            continue
-        cx = sum(p[0] for p in xy) / len(xy)
-        cy = sum(p[1] for p in xy) / len(xy)
+    for area, cx, cy in area_centroids(areas, graph):
         label = area.get("label")
         r, g, b, a = class_rgba(label)
         text = f"{label or '?'} #{area['id']}"

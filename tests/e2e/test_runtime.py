@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 import pytest
 import zenoh
-from support.runtime import ROBOT, _room_scan, write_config
+from support.runtime import ROBOT, AgentProcess, _room_scan, write_config
 
 from agent.bus.bridge import publish_stream
 from agent.bus.codecs import POSE_CODEC
@@ -115,49 +115,6 @@ class FakeBase:
         self._stop.set()
         self._thread.join(2.0)
         self._pub.close()
-
-
-class AgentProcess:
-    """``loci run`` in a subprocess; stderr is collected by a thread."""
-
-    def __init__(self, config: Path, *extra: str) -> None:
-        self.lines: list[str] = []
-        self.ready = threading.Event()
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "agent.cli", "run", "--config", str(config), *extra],
-            cwd=REPO,
-            stderr=subprocess.PIPE,
-            stdout=subprocess.DEVNULL,
-            text=True,
-        )
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self) -> None:
-        assert self.proc.stderr is not None
-        for line in self.proc.stderr:
-            self.lines.append(line)
-            if line.startswith("running robot"):
-                self.ready.set()
-
-    def wait_ready(self, timeout: float = 30.0) -> None:
-        if not self.ready.wait(timeout):
-            self.proc.kill()
-            raise AssertionError("loci run did not start:\n" + "".join(self.lines))
-
-    def stop(self, sig: int = signal.SIGTERM, timeout: float = 15.0) -> int:
-        self.proc.send_signal(sig)
-        rc = self.proc.wait(timeout)
-        time.sleep(0.1)  # the reader thread takes the last lines
-        return rc
-
-    def summary(self) -> dict[str, Any]:
-        line = next(x for x in reversed(self.lines) if x.startswith("summary: "))
-        return json.loads(line[len("summary: ") :])
-
-    def kill(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait(10)
 
 
 class Collector:

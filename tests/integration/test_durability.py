@@ -12,11 +12,8 @@ from __future__ import annotations
 
 import itertools
 import json
-import math
 import os
 import signal
-import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -24,65 +21,17 @@ from typing import Any
 
 import pytest
 import zenoh
+from support.navigation import small_map
+from support.runtime import AgentProcess
 
 from agent.bus.bridge import publish_stream
 from agent.bus.session import BusConfig, bus_session, listening_endpoints
 from knowledge.conceptual import ConceptualMap
-from knowledge.navigation.graph import DOORWAY, PLACE, GraphParams, NavigationGraph
 from knowledge.topology import persistence
 from knowledge.topology.areas import AreaMap
 
 REPO = Path(__file__).resolve().parents[2]
 ROBOT = "durabot"
-
-
-def small_map() -> NavigationGraph:
-    """A corridor (0..3, 0), a door at (3, 1), a room (3..4, 2..3); the robot in the room."""
-    g = NavigationGraph(GraphParams(node_distance=1.0))
-    corridor = [g.add_node(PLACE, (float(x), 0.0), votes={"corridor": 5}).id for x in range(4)]
-    for a, b in itertools.pairwise(corridor):
-        g.add_edge(a, b)
-    door = g.add_node(DOORWAY, (3.0, 1.0), width=0.9, orientation=math.pi / 2).id
-    room = [g.add_node(PLACE, xy, votes={"room": 5}).id for xy in ((3.0, 2.0), (4.0, 2.0), (4.0, 3.0))]
-    g.add_edge(corridor[-1], door)
-    g.add_edge(door, room[0])
-    g.add_edge(room[0], room[1])
-    g.add_edge(room[1], room[2])
-    g.current = room[2]
-    return g
-
-
-class Agent:
-    """``loci run`` in a subprocess that the test may SIGKILL."""
-
-    def __init__(self, config: Path) -> None:
-        self.lines: list[str] = []
-        self.ready = threading.Event()
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "agent.cli", "run", "--config", str(config)],
-            cwd=REPO,
-            stderr=subprocess.PIPE,
-            stdout=subprocess.DEVNULL,
-            text=True,
-        )
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self) -> None:
-        assert self.proc.stderr is not None
-        for line in self.proc.stderr:
-            self.lines.append(line)
-            if line.startswith("running robot"):
-                self.ready.set()
-
-    def wait_ready(self, timeout: float = 60.0) -> None:
-        if not self.ready.wait(timeout):
-            self.kill()
-            raise AssertionError("loci run did not start:\n" + "".join(self.lines))
-
-    def kill(self) -> None:
-        if self.proc.poll() is None:
-            os.kill(self.proc.pid, signal.SIGKILL)
-        self.proc.wait(10)
 
 
 class Acks:
@@ -158,9 +107,9 @@ def test_every_acknowledged_fact_survives_a_sigkill_right_after_the_acknowledgem
         acks = Acks(session)
         intents = publish_stream(session, ROBOT, "dialogue/intent")
         for cycle in range(2):
-            agent = Agent(config)
+            agent = AgentProcess(config)
             try:
-                agent.wait_ready()
+                agent.wait_ready(60.0)
                 acks.pid = agent.proc.pid
                 deadline = time.monotonic() + 10
                 while time.monotonic() < deadline:  # the agent's intent subscriber reached us

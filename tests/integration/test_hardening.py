@@ -17,7 +17,6 @@ import asyncio
 import itertools
 import json
 import logging
-import math
 import struct
 import time
 from collections.abc import Awaitable, Callable
@@ -28,6 +27,7 @@ import cv2
 import numpy as np
 import pytest
 import zenoh
+from support.navigation import small_map
 
 from agent.bus.bridge import publish_stream
 from agent.bus.codecs import CAMERA_CODEC
@@ -37,7 +37,6 @@ from agent.bus.testing import settle
 from agent.config import load_config
 from agent.runtime import Agent
 from drivers.messages import CameraFrame
-from knowledge.navigation.graph import DOORWAY, PLACE, GraphParams, NavigationGraph
 from knowledge.places.model import PlaceModel, default_model_path
 from knowledge.topology import persistence
 from knowledge.topology.areas import AreaMap
@@ -50,22 +49,6 @@ NESTED_INTENT = (
     + b"]" * 1000
     + b"}}"
 )
-
-
-def small_map() -> NavigationGraph:
-    """A corridor (0..3, 0), a door at (3, 1), a room (3..4, 2..3); the robot in the room."""
-    g = NavigationGraph(GraphParams(node_distance=1.0))
-    corridor = [g.add_node(PLACE, (float(x), 0.0), votes={"corridor": 5}).id for x in range(4)]
-    for a, b in itertools.pairwise(corridor):
-        g.add_edge(a, b)
-    door = g.add_node(DOORWAY, (3.0, 1.0), width=0.9, orientation=math.pi / 2).id
-    room = [g.add_node(PLACE, xy, votes={"room": 5}).id for xy in ((3.0, 2.0), (4.0, 2.0), (4.0, 3.0))]
-    g.add_edge(corridor[-1], door)
-    g.add_edge(door, room[0])
-    g.add_edge(room[0], room[1])
-    g.add_edge(room[1], room[2])
-    g.current = room[2]
-    return g
 
 
 def jpeg_claiming(width: int, height: int) -> bytes:

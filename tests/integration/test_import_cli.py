@@ -15,19 +15,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from support.cli import loci
 
 REPO = Path(__file__).resolve().parents[2]
-
-
-def loci(*args: str | Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "agent.cli", *map(str, args)],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
-    )
 
 
 def box_ranges(x: float, y: float, theta: float, n: int = 181, box=(-1.0, 30.0, -1.5, 1.5)) -> np.ndarray:

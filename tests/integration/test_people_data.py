@@ -4,18 +4,21 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from support import cli
 
 from knowledge.people import dataset as ds
 
 REPO = Path(__file__).resolve().parents[2]
 pytestmark = pytest.mark.data
+
+
+def loci(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
+    return cli.loci("people", *args, env=env)
 
 
 @pytest.fixture(scope="module")
@@ -99,17 +102,6 @@ def test_examples_carry_the_distance_for_max_range(legs_dir: Path) -> None:
 def test_missing_data_is_a_clear_error(tmp_path: Path) -> None:
     with pytest.raises(ds.DataError, match="--data"):
         ds.find_legs_dir(tmp_path)
-
-
-def loci(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "agent.cli", "people", *args],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        env={**os.environ, **(env or {})},
-    )
 
 
 @pytest.mark.slow

@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 import zipfile
 from pathlib import Path
 
@@ -17,6 +15,7 @@ import numpy as np
 import pytest
 from rosbags.typesys import get_types_from_msg
 from support.bags import Bag
+from support.cli import loci
 
 from agent.people_tracks import (
     TrackFrame,
@@ -37,17 +36,6 @@ N_BEAMS, INC, AMIN, RMAX = 768, 0.006135923322290182, -2.356194496154785, 11.0
 PERSON = "geometry_msgs/Pose pose\nuint32 id\n"  # leg_tracker/Person, as in the benchmark bag
 RATE = 7.5
 MOUNT = (0.3, 0.1, 0.2)  # the laser on the base: x, y, yaw
-
-
-def loci(*args: str | Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "agent.cli", *map(str, args)],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
-    )
 
 
 def compose(a: tuple[float, float, float], b: tuple[float, float, float]) -> tuple[float, float, float]:

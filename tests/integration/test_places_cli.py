@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 import yaml
+from support import cli
 
 from knowledge import labels as lbl
 from knowledge.metric.grid import OccupancyGrid
@@ -19,12 +19,7 @@ from sim.buildings import generate_building
 
 
 def loci(*args: str, check: bool = True) -> subprocess.CompletedProcess[str]:
-    proc = subprocess.run(
-        [sys.executable, "-m", "agent.cli", "-q", *args], capture_output=True, text=True, timeout=600
-    )
-    if check and proc.returncode != 0:
-        raise AssertionError(f"loci {' '.join(args)} failed ({proc.returncode}):\n{proc.stderr}")
-    return proc
+    return cli.loci("-q", *args, check=check)
 
 
 @pytest.fixture(scope="module")

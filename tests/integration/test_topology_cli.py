@@ -3,9 +3,7 @@
 from __future__ import annotations
 
 import json
-import os
 import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -13,6 +11,7 @@ import cv2
 import numpy as np
 import pytest
 import yaml
+from support import cli
 
 from agent.cli import main
 from knowledge import labels as lbl
@@ -28,18 +27,7 @@ RES = 0.1
 
 
 def loci(*args: str | Path, check: bool = True) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    proc = subprocess.run(
-        [sys.executable, "-m", "agent.cli", "-q", *map(str, args)],
-        cwd=REPO,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    if check and proc.returncode != 0:
-        raise AssertionError(f"loci {' '.join(map(str, args))} failed ({proc.returncode}):\n{proc.stderr}")
-    return proc
+    return cli.loci("-q", *args, check=check)
 
 
 def read(path: Path, flags: int = cv2.IMREAD_UNCHANGED) -> np.ndarray:

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from knowledge.navigation.doorways import Doorway
-from knowledge.navigation.graph import NavigationGraph
+from knowledge.navigation.graph import DOORWAY, PLACE, GraphParams, NavigationGraph
 
 Point = tuple[float, float]
 
@@ -43,3 +43,19 @@ def drive(
                     passed.discard(i)
             g.update((x, y, heading), label, doorway, in_opening=in_opening)
     g.update((*points[-1], 0.0), label)
+
+
+def small_map() -> NavigationGraph:
+    """A corridor (0..3, 0), a door at (3, 1), a room (3..4, 2..3); the robot in the room."""
+    g = NavigationGraph(GraphParams(node_distance=1.0))
+    corridor = [g.add_node(PLACE, (float(x), 0.0), votes={"corridor": 5}).id for x in range(4)]
+    for a, b in itertools.pairwise(corridor):
+        g.add_edge(a, b)
+    door = g.add_node(DOORWAY, (3.0, 1.0), width=0.9, orientation=math.pi / 2).id
+    room = [g.add_node(PLACE, xy, votes={"room": 5}).id for xy in ((3.0, 2.0), (4.0, 2.0), (4.0, 3.0))]
+    g.add_edge(corridor[-1], door)
+    g.add_edge(door, room[0])
+    g.add_edge(room[0], room[1])
+    g.add_edge(room[1], room[2])
+    g.current = room[2]
+    return g

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import math
-import subprocess
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,6 +16,7 @@ from drivers.messages import LaserScan, Pose2D
 from knowledge.metric.raycast import cast
 from knowledge.places.model import PlaceModel
 from sim.buildings import generate_building
+from support.cli import loci  # noqa: F401  (the tests import it from here too)
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -84,14 +83,3 @@ def expected(
     for scan, pose in list(zip(run.scans, run.scan_poses, strict=True))[:n]:
         p.process(scan, pose)
     return p
-
-
-def loci(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "agent.cli", *args],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-    )

@@ -308,15 +308,10 @@ def read_annotations(
             no (or several, without ``scan_topic``) LaserScan topics, or a message that does not
             deserialize (its number on the topic is named).
     """
-    from rosbags.rosbag1 import Reader
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     src = Path(path)
-    try:
-        reader = Reader(src)
-        reader.open()
-    except Exception as exc:  # rosbags raises its own errors, and OSError, on damage
-        raise DataError(f"{src}: cannot open as a ROS 1 bag: {exc}") from exc
+    reader = _open_bag(src)
     try:
         conns = {c.topic: c for c in reader.connections}
         ann = conns.get(topic)
@@ -475,17 +470,12 @@ def read_bag_scans(path: str | Path, *, scan_topic: str | None = None) -> list[A
         DataError: the bag does not open, the scan topic is ambiguous or missing, or a scan
             does not deserialize or has impossible values (its number is named).
     """
-    from rosbags.rosbag1 import Reader
     from rosbags.typesys import Stores, get_typestore
 
     from agent.recording.rosbag import BadMessage, scan_from_ros
 
     src = Path(path)
-    try:
-        reader = Reader(src)
-        reader.open()
-    except Exception as exc:  # rosbags raises its own errors, and OSError, on damage
-        raise DataError(f"{src}: cannot open as a ROS 1 bag: {exc}") from exc
+    reader = _open_bag(src)
     try:
         conns = {c.topic: c for c in reader.connections}
         scan_topic = _scan_topic(src, conns, scan_topic)
@@ -562,3 +552,15 @@ def _scan_topic(src: Path, conns: dict[str, Any], wanted: str | None) -> str:
     if wanted not in scans:
         raise DataError(f"{src}: {wanted} is not a LaserScan topic (those: {', '.join(scans) or 'none'})")
     return wanted
+
+
+def _open_bag(src: Path) -> Any:
+    """A rosbags ROS 1 reader, open; DataError when the file cannot be read as a bag."""
+    from rosbags.rosbag1 import Reader
+
+    try:
+        reader = Reader(src)
+        reader.open()
+    except Exception as exc:  # rosbags raises its own errors, and OSError, on damage
+        raise DataError(f"{src}: cannot open as a ROS 1 bag: {exc}") from exc
+    return reader

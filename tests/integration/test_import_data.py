@@ -12,6 +12,7 @@ import zipfile
 from pathlib import Path
 
 import pytest
+from support.cli import loci
 
 from agent.recording.carmen import CarmenOptions
 from agent.recording.imported import ODOM, SCAN, TRUTH
@@ -109,31 +110,20 @@ def test_loci_evaluate_log_on_a_stretch_of_freiburg_079(shared_data: Path, tmp_p
     along the corridor and into the first rooms) with the data set's per-scan labels and
     labelled map: every processed scan is scored, and the agent does better than chance."""
     import json
-    import subprocess
-    import sys
 
     logs = shared_data / "logs"
     head = prefix(logs / "freiburg-079-corrected.log.gz", tmp_path / "head.log.gz", 4000)
     rec = tmp_path / "head.mcap"
     import_log(head, rec, emit=lambda s: None)
-    out = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "agent.cli",
-            "evaluate",
-            "log",
-            str(rec),
-            "--labels",
-            str(logs / "fr079_labels_provisional.npz"),
-            "--label-map",
-            str(logs / "Freiburg79_labels_provisional.png"),
-            "--json",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
+    out = loci(
+        "evaluate",
+        "log",
+        str(rec),
+        "--labels",
+        str(logs / "fr079_labels_provisional.npz"),
+        "--label-map",
+        str(logs / "Freiburg79_labels_provisional.png"),
+        "--json",
     )
     assert out.returncode == 0, out.stderr
     got = json.loads(out.stdout)

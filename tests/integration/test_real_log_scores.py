@@ -11,8 +11,6 @@ from __future__ import annotations
 import itertools
 import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import cv2
@@ -20,6 +18,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from support.cli import loci
 
 from agent.bus.bridge import RawSample
 from agent.bus.codecs import LASER_SCAN_CODEC, POSE_CODEC
@@ -234,26 +233,17 @@ def test_loci_evaluate_log_replays_and_scores_a_recording(tmp_path: Path) -> Non
         ),
     )
     cv2.imwrite(str(tmp_path / "map.png"), img)
-    out = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "agent.cli",
-            "evaluate",
-            "log",
-            str(rec),
-            "--labels",
-            str(tmp_path / "labels.npz"),
-            "--label-map",
-            str(tmp_path / "map.png"),
-            "--out-dir",
-            str(tmp_path / "out"),
-            "--json",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
+    out = loci(
+        "evaluate",
+        "log",
+        str(rec),
+        "--labels",
+        str(tmp_path / "labels.npz"),
+        "--label-map",
+        str(tmp_path / "map.png"),
+        "--out-dir",
+        str(tmp_path / "out"),
+        "--json",
     )
     assert out.returncode == 0, out.stderr
     got = json.loads(out.stdout)
@@ -266,40 +256,16 @@ def test_loci_evaluate_log_replays_and_scores_a_recording(tmp_path: Path) -> Non
     (tmp_path / "align.json").write_text(
         json.dumps({"rot_deg": 0, "m_per_px": 0.05, "tx_px": 20, "ty_px": 140})
     )
-    text = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "agent.cli",
-            "evaluate",
-            "log",
-            str(rec),
-            "--labels",
-            str(tmp_path / "map.png"),
-            "--align",
-            str(tmp_path / "align.json"),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
+    text = loci(
+        "evaluate",
+        "log",
+        str(rec),
+        "--labels",
+        str(tmp_path / "map.png"),
+        "--align",
+        str(tmp_path / "align.json"),
     )
     assert text.returncode == 0, text.stderr
     assert "per scan, room/corridor:" in text.stdout and "doors driven through" in text.stdout
-    bad = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "agent.cli",
-            "evaluate",
-            "log",
-            str(rec),
-            "--labels",
-            str(tmp_path / "map.png"),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
-    )
+    bad = loci("evaluate", "log", str(rec), "--labels", str(tmp_path / "map.png"))
     assert bad.returncode == 2 and "--align" in bad.stderr

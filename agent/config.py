@@ -402,12 +402,22 @@ class LocalizationConfig:
         max_range: metres; longer beams are not matched.
         beam_step: match every ``beam_step``-th beam.
         accept_fit: the least mean score of a match that is taken.
+        lag: scans; the tracker runs on its own thread and scan ``k`` is corrected with what
+            it found for scan ``k − lag`` (0: in the per-scan path, adding its 4–9 ms to every
+            scan; docs/localization.md "In the agent").
     """
 
     tracking: bool = False
     max_range: float = 20.0
     beam_step: int = 2
     accept_fit: float = 0.3
+    lag: int = 3
+
+    def __post_init__(self) -> None:
+        if isinstance(self.lag, bool) or not isinstance(self.lag, int) or not 0 <= self.lag <= 100:
+            raise ValueError(
+                f"localization.lag must be a whole number of scans in [0, 100], got {self.lag!r}"
+            )
 
     def tracking_params(self) -> Any:
         """The tracker's parameters, or None when tracking is off."""

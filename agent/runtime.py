@@ -830,12 +830,27 @@ class Agent:
             return
         self.report.saves += 1
 
+    def _tracking_extra(self) -> dict[str, Any]:
+        """``[localization]``: the tracker's own time per scan (off the per-scan path when it
+        runs on its own thread) and the scans that had to wait for it."""
+        pipeline = self.pipeline
+        if pipeline is None or pipeline.tracker is None:
+            return {}
+        return {
+            "tracking": {
+                "ms": _percentiles(pipeline.tracking_ms),
+                "lag": pipeline.params.tracking_lag,
+                "waits": pipeline.tracking_waits,
+            }
+        }
+
     def _extra(self) -> dict[str, Any]:
         pipeline = self.pipeline
         out: dict[str, Any] = {
             "scans": {"fed": self.report.scans_fed, "processed": pipeline.scans if pipeline else 0},
             "sync": self.sync.stats.as_dict(),
             "latency_ms": {"process": _percentiles(self._process_ms), "age": _percentiles(self._age_ms)},
+            **self._tracking_extra(),
             "errors": self.report.errors,
             "restarts": self.restarts.as_dict(),
             "saves": self.report.saves,
@@ -882,6 +897,8 @@ class Agent:
             self._feed(self.sync.close())
             if self.pipeline is not None and (self._dirty or self.pipeline.scans):
                 await self._save()
+            if self.pipeline is not None:
+                self.pipeline.close()  # the tracker's thread, if it has one
             self._fill_report()
             with contextlib.suppress(Exception):
                 if "diagnostics" in self._pubs:

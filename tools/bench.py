@@ -62,6 +62,12 @@ BENCHMARKS: list[tuple[str, str, list[str], str]] = [
         "the particle filter: updates per second against particles, 180 beams, one core (target 10,000 at ≥ 10 Hz)",
     ),
     (
+        "tracking",
+        "tools.bench_tracking",
+        [],
+        "pose tracking in the agent: the per-scan path with the tracker off, inline and on its own thread (target p99 < 5 ms)",
+    ),
+    (
         "replay",
         "tools.bench_replay",
         [],

@@ -593,9 +593,8 @@ class DialogueAgent:
     def _to_odom(self, x: float, y: float, theta: float = 0.0) -> tuple[float, float, float]:
         """A point of the map (the graph's, the tracks' frame) in the odometry frame the base
         drives in: the same unless the pipeline tracks its pose (``[localization]``), whose
-        latest map -> odom correction is undone."""
-        tracker = getattr(self.world, "tracker", None)
-        c = getattr(tracker, "correction", None)
+        map -> odom correction (the one the latest scan's pose was given) is undone."""
+        c = getattr(self.world, "correction", None)
         if c is None:
             return x, y, theta
         from knowledge.localization.se2 import compose, inverse

@@ -8,7 +8,13 @@ scan's stamp (:mod:`agent.core.odom_sync`) and runs, in this order:
    (``[localization]``, off unless configured) that pose is corrected by matching the scan
    against the map built so far (:class:`~knowledge.localization.tracking.PoseTracker`) and
    everything below lives in the corrected ``map`` frame (:attr:`StepResult.correction` is
-   the map → odom transform);
+   the map → odom transform); with ``tracking_lag`` ``L > 0`` (``[localization] lag``, the
+   agent's default) the tracker runs on a worker thread of its own, one scan after the other,
+   and scan ``k`` is corrected with the map → odom transform the tracker found for scan
+   ``k − L``: the matching (4–9 ms) leaves the per-scan path, and because the lag is a fixed
+   number of scans, not "the newest result", a replay corrects every scan as the live run
+   did; the chain waits for the tracker only when it is more than ``L`` scans behind
+   (:attr:`Pipeline.tracking_waits`);
 1a. people (``[people]``, on by default): the leg detector, leg pairing and tracking of
    :class:`~knowledge.people.pipeline.PeoplePipeline` on the scan as measured, tracks in the
    odometry frame (:attr:`StepResult.people`); with ``mask`` the beams of the legs of
@@ -56,8 +62,10 @@ persisted document.
 from __future__ import annotations
 
 import math
+import time
 from collections import deque
 from collections.abc import Mapping
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
@@ -67,7 +75,8 @@ from agent.tables import build_dataclass, dataclass_table
 from drivers.messages import LaserScan, Pose2D
 from knowledge.learning.hmm import HMMFilter
 from knowledge.localization.scan_matching import MatchParams
-from knowledge.localization.tracking import PoseTracker, TrackingParams
+from knowledge.localization.se2 import compose as se2_compose
+from knowledge.localization.tracking import PoseTracker, TrackingParams, TrackStep
 from knowledge.metric.local_map import LocalMap, LocalMapParams, beam_endpoints
 from knowledge.metric.rear_beams import FullScanParams, assemble_scan
 from knowledge.navigation.doorways import Doorway, DoorwayDetector, DoorwayParams, scan_points
@@ -180,6 +189,9 @@ class PipelineParams:
         doorways: the doorway detector.
         people: people detection and masking.
         localization: pose tracking by scan matching (None: trust the odometry).
+        tracking_lag: scans; 0: the tracker runs in :meth:`Pipeline.process`; ``L > 0``: on
+            its own thread, scan ``k`` corrected with scan ``k − L``'s result (see the module
+            docstring).
         places: the HMM filter of the place labels and which label votes.
     """
 
@@ -191,8 +203,17 @@ class PipelineParams:
     people: PeopleParams = field(default_factory=PeopleParams)
     localization: TrackingParams | None = None
     places: PlaceFilterParams = field(default_factory=PlaceFilterParams)
+    tracking_lag: int = 0
 
     def __post_init__(self) -> None:
+        if (
+            isinstance(self.tracking_lag, bool)
+            or not isinstance(self.tracking_lag, int)
+            or not 0 <= self.tracking_lag <= 100
+        ):
+            raise ValueError(
+                f"tracking_lag must be a whole number of scans in [0, 100], got {self.tracking_lag!r}"
+            )
         m = tuple(float(v) for v in self.mount)
         if len(m) != 3 or not all(math.isfinite(v) for v in m):
             raise ValueError(f"mount must be a finite (x [m], y [m], yaw [rad]), got {self.mount!r}")
@@ -209,11 +230,16 @@ class PipelineParams:
             people=PeopleParams(enabled=config.people.enabled, mask=config.people.mask),
             localization=config.localization.tracking_params(),
             places=PlaceFilterParams(hmm=config.places.hmm, vote=config.places.vote),
+            tracking_lag=config.localization.lag if config.localization.tracking else 0,
         )
 
     def to_table(self) -> dict[str, Any]:
         """Plain JSON-able values (stored in recordings so a replay uses the same parameters)."""
-        extra = {} if self.localization is None else {"localization": dataclass_table(self.localization)}
+        extra: dict[str, Any] = {}
+        if self.localization is not None:
+            extra["localization"] = dataclass_table(self.localization)
+            if self.tracking_lag:  # absent: the tracker ran in the per-scan path (older recordings)
+                extra["tracking_lag"] = self.tracking_lag
         return extra | {
             "mount": list(self.mount),
             "local_map": dataclass_table(self.local_map),
@@ -235,6 +261,7 @@ class PipelineParams:
         from knowledge.errors import ConfigError
 
         known = {"mount", "local_map", "rear_beams", "graph", "doorways", "people", "localization", "places"}
+        known.add("tracking_lag")
         unknown = sorted(set(table) - known)
         if unknown:
             raise ConfigError(f"pipeline parameters: unknown key {unknown[0]!r}")
@@ -250,6 +277,7 @@ class PipelineParams:
             people=build_dataclass(PeopleParams, table.get("people", {"enabled": False}), "people"),
             localization=_tracking_from(table["localization"]) if table.get("localization") else None,
             places=build_dataclass(PlaceFilterParams, table.get("places", {"hmm": False}), "places"),
+            tracking_lag=_lag_from(table.get("tracking_lag", 0)),
         )
 
 
@@ -385,6 +413,63 @@ class Pipeline:
         self._angles: tuple[tuple[int, float, float], np.ndarray] | None = None
         loc = self.params.localization
         self.tracker: PoseTracker | None = PoseTracker(loc) if loc is not None else None
+        self._lag = self.params.tracking_lag if self.tracker is not None else 0
+        self._track_pool: ThreadPoolExecutor | None = None
+        self._track_jobs: deque[Future[TrackStep]] = deque()
+        self._correction = np.zeros(3)  # map -> odom applied; the tracker starts at identity
+        #: milliseconds the tracker took per scan (the newest 1000), wherever it ran
+        self.tracking_ms: deque[float] = deque(maxlen=1000)
+        #: scans that waited for a tracker more than ``tracking_lag`` scans behind
+        self.tracking_waits = 0
+
+    @property
+    def correction(self) -> np.ndarray | None:
+        """``(3,)`` the map → odom transform the latest scan was corrected with (None:
+        tracking off). With a ``tracking_lag`` this is scan ``k − L``'s, not the tracker's newest."""
+        return None if self.tracker is None else self._correction.copy()
+
+    def close(self) -> None:
+        """Stop the tracker's thread (if it runs on one); pending scans are dropped."""
+        if self._track_pool is not None:
+            self._track_pool.shutdown(wait=True, cancel_futures=True)
+            self._track_pool = None
+            self._track_jobs.clear()
+
+    def _timed_track(
+        self, ranges: np.ndarray, angles: np.ndarray, sensor: np.ndarray, scan: LaserScan
+    ) -> TrackStep:
+        assert self.tracker is not None
+        t0 = time.perf_counter()
+        step = self.tracker.update(ranges, angles, sensor, range_max=scan.range_max, range_min=scan.range_min)
+        self.tracking_ms.append((time.perf_counter() - t0) * 1e3)
+        return step
+
+    def _pose_before_tracking(self, sensor: np.ndarray) -> np.ndarray:
+        """The laser's map pose known before this scan is matched: with a lag, the final one
+        (scan ``k − L``'s correction, collected here); inline, the tracker's prediction."""
+        if self._lag and len(self._track_jobs) >= self._lag:
+            job = self._track_jobs.popleft()
+            if not job.done():
+                self.tracking_waits += 1
+            self._correction = job.result().correction
+        assert self.tracker is not None
+        c = self._correction if self._lag or self.tracker.correction is None else self.tracker.correction
+        return se2_compose(c, sensor)
+
+    def _track(
+        self, scan: LaserScan, ranges: np.ndarray, angles: np.ndarray, sensor: np.ndarray, pose: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Match ``ranges`` (the scan, people hidden) from the odometry pose ``sensor``: the
+        laser's pose in the map and the map → odom correction it was given (with a lag the
+        match runs on the tracker's thread and ``pose``, from :meth:`_pose_before_tracking`, stands)."""
+        if self._lag == 0:
+            step = self._timed_track(ranges, angles, sensor, scan)
+            self._correction = step.correction
+            return step.pose, step.correction
+        if self._track_pool is None:
+            self._track_pool = ThreadPoolExecutor(1, thread_name_prefix="loci-tracking")
+        self._track_jobs.append(self._track_pool.submit(self._timed_track, ranges, angles, sensor, scan))
+        return pose, self._correction.copy()
 
     # ------------------------------------------------------------------ per scan
     def _beam_angles(self, scan: LaserScan) -> np.ndarray:
@@ -408,11 +493,10 @@ class Pipeline:
         angles = self._beam_angles(scan)
         correction = None
         frame_id = pose.frame_id
+        odom_sensor = sensor
         if self.tracker is not None:
-            track = self.tracker.update(
-                scan.ranges, angles, sensor, range_max=scan.range_max, range_min=scan.range_min
-            )
-            sensor, correction, frame_id = track.pose, track.correction, "map"
+            sensor = self._pose_before_tracking(odom_sensor)
+            frame_id = "map"
         fsp = self.params.rear_beams
         full = is_full_turn(scan)
         frame: PeopleFrame | None = None
@@ -423,6 +507,19 @@ class Pipeline:
             frame = self.people.process_scan(
                 scan, sensor_pose=(float(sensor[0]), float(sensor[1]), float(sensor[2]))
             )
+        if self.tracker is not None:
+            # people are no landmarks: the legs of everyone detected (free-standing ones, not a
+            # wall's end) are hidden from the matcher and its map; a tutor walking ahead
+            # otherwise drags the match back along a corridor (docs/localization.md)
+            track_r = raw
+            if frame is not None:
+                pp = self.params.people
+                legs = person_beams(frame.detection, margin=pp.margin, clearance=pp.clearance or None)
+                if legs.any():
+                    track_r = np.where(legs, np.nan, raw).astype(raw.dtype, copy=False)
+            sensor, correction = self._track(scan, track_r, angles, odom_sensor, sensor)
+        if self.people is not None:
+            assert frame is not None
             pp = self.params.people
             if pp.mask:
                 walking = None
@@ -578,6 +675,16 @@ class Pipeline:
             ranges = np.minimum(4.0 / np.maximum(np.abs(np.cos(a)), 0.2), 10.0).astype(np.float32)
             scan = LaserScan(float(i), i, "laser", angle_min, inc, 30.0, ranges)
             p.process(scan, Pose2D(0.1 * i, 0.0, 0.0, stamp=float(i)))
+
+
+def _lag_from(value: Any) -> int:
+    from knowledge.errors import ConfigError
+
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 100:
+        raise ConfigError(
+            f"pipeline parameters: tracking_lag must be a whole number in [0, 100], got {value!r}"
+        )
+    return value
 
 
 def _tracking_from(table: Mapping[str, Any]) -> TrackingParams:

@@ -163,13 +163,15 @@ async def play_tour(
                 return True
         return False
 
-    async def node_xy(node: int | None) -> tuple[float, float] | None:
+    async def node_xy(node: int | None) -> tuple[tuple[float, float], str] | None:
+        """A node's position and the frame the graph is in (``odom``, or ``map`` when the
+        agent tracks its pose)."""
         if node is None:
             return None
         graph = await conv.aquery("graph") or {}
         for n in graph.get("nodes", []):
             if int(n["id"]) == node:
-                return (float(n["x"]), float(n["y"]))
+                return (float(n["x"]), float(n["y"])), str(graph.get("frame_id") or "odom")
         return None
 
     for i, line in enumerate(SCRIPT):
@@ -291,8 +293,12 @@ async def play_tour(
                 if line.step == "go_tv":
                     want = goal
                     tv_node = goal
-                target = await node_xy(want)
-                odom = conv.odom_xy()
+                found = await node_xy(want)
+                # where the robot is, in the graph's frame: the odometry's pose in ``odom``; in
+                # ``map`` (the tracker's frame, which starts at the true pose of the first scan)
+                # the simulator's true pose, so a node mapped or reached in the wrong place fails
+                target, frame = found if found is not None else (None, "odom")
+                odom = conv.truth_xy() if frame == "map" else conv.odom_xy()
                 if target is not None and odom is not None:
                     d = math.dist(target, odom)
                     o.evidence["metres_from_node"] = round(d, 3)

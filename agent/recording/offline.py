@@ -350,6 +350,7 @@ def replay_recording(
             continue
         feed(associate.add_scan(scan, now))
     feed(associate.close())
+    pipeline.close()  # the tracker's thread, if it has one
     apply_edits(pipeline.last_stamp)
     if edits:
         log.warning("%s: %d map edits came after the last replayed scan; not applied", p, len(edits))

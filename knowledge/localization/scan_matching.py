@@ -19,7 +19,19 @@ to the nearest obstacle, :class:`~knowledge.localization.likelihood.LikelihoodFi
 keeps whichever fits better, when the refined fit is poor or the caller asks
 (``search="auto"``), or always, or never. A refinement that ends further from the prior than
 the search window (plus the widest ``σ``) is not taken: along a corridor, with a person
-walking ahead, it can slide a metre. Poses here are the laser's, in the
+walking ahead, it can slide a metre.
+
+**The prior** (``translation_weight``, ``rotation_weight``; 0: none): a match also pays
+``translation_weight·|Δt|² + rotation_weight·Δθ²`` for how far it moved from where it started
+(``Δt`` metres, ``Δθ`` radians), against the mean squared residual ``mean (1 − M)²`` of its
+endpoints — Cartographer's Ceres scan matcher's translation and rotation weights. Where the
+scan pins the pose down (walls across the motion) a centimetre of misfit costs far more than
+the prior, and the scan wins; along a corridor, where the scan says almost nothing, the
+prior keeps the pose where the odometry put it instead of letting a few stray endpoints (a
+person's legs, a door jamb) slide it. The correlative search weighs its candidates alike,
+``mean score · exp(−translation_weight·|Δt|² − rotation_weight·Δθ²)`` (Cartographer's
+real-time correlative scan matcher), and :meth:`ScanMatcher.match` compares the refined
+candidates by that product. Poses here are the laser's, in the
 field's map frame (:meth:`~knowledge.localization.likelihood.LikelihoodField.to_map`); scan
 points are ``(M, 2)`` metres in the laser's frame.
 """
@@ -71,6 +83,8 @@ class MatchParams:
         linear_window: metres, half the side of the search square.
         angular_window: radians, half the searched heading interval.
         angular_step: radians between searched headings.
+        translation_weight: per square metre moved from the start (the prior; 0: none).
+        rotation_weight: per square radian turned from the start (the prior; 0: none).
     """
 
     sigmas: tuple[float, ...] = (0.25, 0.1, 0.05)
@@ -80,8 +94,14 @@ class MatchParams:
     linear_window: float = 0.3
     angular_window: float = 0.2
     angular_step: float = 0.01
+    translation_weight: float = 0.0
+    rotation_weight: float = 0.0
 
     def __post_init__(self) -> None:
+        for name in ("translation_weight", "rotation_weight"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
         if not self.sigmas or any(not s > 0 for s in self.sigmas):
             raise ValueError(f"sigmas must be positive metres, got {self.sigmas}")
         if self.iterations < 1:
@@ -181,8 +201,11 @@ def _correlate(
     res: float,
     n_lin: int,
     angles: np.ndarray,
+    w_t: float,
+    w_r: float,
 ) -> tuple:
-    """The best ``(dx_cells, dy_cells, angle index, summed score)`` around ``(x, y, th)``."""
+    """The best ``(dx_cells, dy_cells, angle index, weighed score)`` around ``(x, y, th)``:
+    the summed score of the endpoints times ``exp(−w_t·|Δt|² − w_r·Δθ²)``."""
     rows, cols = score.shape
     best = -1.0
     bi, bj, bk = 0, 0, 0
@@ -192,6 +215,7 @@ def _correlate(
     for k in range(angles.shape[0]):
         a = th + angles[k]
         c, s = math.cos(a), math.sin(a)
+        turn = w_r * angles[k] * angles[k]
         for p in range(m):
             px, py = pts[p, 0], pts[p, 1]
             cj[p] = math.floor((x + c * px - s * py) / res)
@@ -204,6 +228,8 @@ def _correlate(
                     q = cj[p] + dj
                     if 0 <= r < rows and 0 <= q < cols:
                         tot += score[r, q]
+                if w_t > 0.0 or w_r > 0.0:
+                    tot *= math.exp(-w_t * (di * di + dj * dj) * res * res - turn)
                 if tot > best:
                     best = tot
                     bi, bj, bk = di, dj, k
@@ -221,18 +247,33 @@ class ScanMatcher:
         return MatchField(field, self.params.sigmas)
 
     def refine(
-        self, mf: MatchField, points: np.ndarray, pose: npt.ArrayLike
+        self,
+        mf: MatchField,
+        points: np.ndarray,
+        pose: npt.ArrayLike,
+        prior: npt.ArrayLike | None = None,
+        weights: tuple[float, float] | None = None,
     ) -> tuple[np.ndarray, float, np.ndarray]:
-        """Gauss–Newton from ``pose`` over every ``σ`` stage: (pose, fit, last ``JᵀJ``)."""
+        """Gauss–Newton from ``pose`` over every ``σ`` stage: (pose, fit, last ``JᵀJ``);
+        ``prior`` (default ``pose``) is where the prior's weights pull, ``weights`` (translation,
+        rotation; default the parameters') how hard."""
         x, y, th = (float(v) for v in np.asarray(pose, dtype=np.float64))
+        x0, y0, th0 = (x, y, th) if prior is None else (float(v) for v in np.asarray(prior, dtype=np.float64))
         res = mf.resolution
         H = np.zeros((3, 3))
         fit = 0.0
+        # the prior's weights on the summed residual: n endpoints, each carrying 1/n of it
+        n = float(points.shape[0])
+        w_t, w_r = self._weights(weights)
+        W = n * np.array([w_t, w_t, w_r])
         for sigma, score in zip(mf.sigmas, mf.scores, strict=True):
             for _ in range(self.params.iterations):
                 H, b, fit = _gn_system(score, points, x, y, th, res)
                 # a little damping keeps a flat direction (a corridor's length) where it was
                 A = H + np.diag([1e-6, 1e-6, 1e-6]) + 1e-3 * np.diag(np.diag(H))
+                if W.any():
+                    A = A + np.diag(W)
+                    b = b + W * np.array([x0 - x, y0 - y, math.remainder(th0 - th, 2.0 * math.pi)])
                 try:
                     d = np.linalg.solve(A, b)
                 except np.linalg.LinAlgError:
@@ -253,7 +294,21 @@ class ScanMatcher:
         th = math.atan2(math.sin(th), math.cos(th))
         return np.array([x, y, th]), float(fit), H
 
-    def search(self, mf: MatchField, points: np.ndarray, pose: npt.ArrayLike) -> np.ndarray:
+    def _weights(self, weights: tuple[float, float] | None) -> tuple[float, float]:
+        if weights is None:
+            return self.params.translation_weight, self.params.rotation_weight
+        w_t, w_r = (float(w) for w in weights)
+        if not (math.isfinite(w_t) and math.isfinite(w_r) and w_t >= 0 and w_r >= 0):
+            raise ValueError(f"the prior's weights must be finite numbers >= 0, got {weights!r}")
+        return w_t, w_r
+
+    def search(
+        self,
+        mf: MatchField,
+        points: np.ndarray,
+        pose: npt.ArrayLike,
+        weights: tuple[float, float] | None = None,
+    ) -> np.ndarray:
         """The correlative search's best pose around ``pose`` (on the narrowest score)."""
         prm = self.params
         x, y, th = (float(v) for v in np.asarray(pose, dtype=np.float64))
@@ -261,14 +316,23 @@ class ScanMatcher:
         n_lin = round(prm.linear_window / res)
         n_ang = round(prm.angular_window / prm.angular_step)
         angles = np.arange(-n_ang, n_ang + 1) * prm.angular_step
-        dj, di, k, _ = _correlate(mf.scores[-1], points, x, y, th, res, n_lin, angles)
+        w_t, w_r = self._weights(weights)
+        dj, di, k, _ = _correlate(mf.scores[-1], points, x, y, th, res, n_lin, angles, w_t, w_r)
         return np.array([x + dj * res, y + di * res, th + float(angles[k])])
 
     def match(
-        self, mf: MatchField, points: np.ndarray, prior: npt.ArrayLike, *, search: bool = False
+        self,
+        mf: MatchField,
+        points: np.ndarray,
+        prior: npt.ArrayLike,
+        *,
+        search: bool = False,
+        weights: tuple[float, float] | None = None,
     ) -> MatchResult:
         """The pose of the scan ``points`` near ``prior`` (see the module docstring);
-        ``search``: search first whatever the mode (the caller knows the prior is weak)."""
+        ``search``: search first whatever the mode (the caller knows the prior is weak);
+        ``weights``: the prior's (translation, rotation) weights for this scan (default the
+        parameters')."""
         prm = self.params
         pts = np.ascontiguousarray(points, dtype=np.float64)
         if pts.ndim != 2 or pts.shape[1] != 2:
@@ -277,15 +341,28 @@ class ScanMatcher:
         searched = False
         if pts.shape[0] == 0:
             return MatchResult(start.copy(), 0.0, False, np.zeros((3, 3)), 0)
-        pose, fit, H = self.refine(mf, pts, start)
+        pose, fit, H = self.refine(mf, pts, start, weights=weights)
         if not self._within(start, pose):
             pose, fit, H = self._stay(mf, pts, start)
         if prm.search == "always" or (prm.search == "auto" and (search or fit < prm.min_fit)):
-            cand, cfit, cH = self.refine(mf, pts, self.search(mf, pts, start))
+            cand, cfit, cH = self.refine(mf, pts, self.search(mf, pts, start, weights), start, weights)
             searched = True
-            if cfit > fit and self._within(start, cand):
+            # the candidates compared as the search weighs them: fit times the prior's factor
+            mine = cfit * self._prior_factor(start, cand, weights)
+            if mine > fit * self._prior_factor(start, pose, weights) and self._within(start, cand):
                 pose, fit, H = cand, cfit, cH
         return MatchResult(pose, fit, searched, H, int(pts.shape[0]))
+
+    def _prior_factor(
+        self, start: np.ndarray, pose: np.ndarray, weights: tuple[float, float] | None = None
+    ) -> float:
+        """``exp(−translation_weight·|Δt|² − rotation_weight·Δθ²)`` from ``start`` to ``pose``."""
+        w_t, w_r = self._weights(weights)
+        if w_t == 0.0 and w_r == 0.0:
+            return 1.0
+        d2 = (pose[0] - start[0]) ** 2 + (pose[1] - start[1]) ** 2
+        a = math.remainder(float(pose[2] - start[2]), 2.0 * math.pi)
+        return math.exp(-w_t * d2 - w_r * a * a)
 
     def _within(self, start: np.ndarray, pose: np.ndarray) -> bool:
         """Whether ``pose`` lies within the search window (plus the widest σ) of ``start``: a

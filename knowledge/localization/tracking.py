@@ -22,6 +22,18 @@ two scans) would throw the prediction beyond any search window: when the fit fro
 odometry's prediction is poor and the motion the tracker saw last points elsewhere, the
 scan is also matched (with the search) from there, and the better fit wins.
 
+**The odometry as a prior.** Each match also pays for moving away from the prediction
+(:class:`~knowledge.localization.scan_matching.MatchParams`' translation and rotation
+weights), with weights that shrink as the odometry's increment since the last scan grows —
+``prior_translation / (d + 0.01 m)`` and ``prior_rotation / (|Δθ| + 0.01 rad)`` — because
+odometry's error grows with the motion it integrates: a robot that moved a centimetre since
+the last scan knows where it is to well under a centimetre, one that moved 20 cm and turned
+0.3 rad (the CSAIL log between scans) does not. Along a corridor, where the scan barely fixes
+the position along it, the prior keeps the odometry's motion instead of letting stray
+endpoints (a tutor's legs walking ahead, a door jamb) slide the pose back by a metre; across
+walls the scan outweighs it by far. The fallback from the last motion (below) has no prior:
+there the odometry is what went wrong.
+
 A scan whose fit stays below ``accept_fit`` (too few endpoints near mapped walls: an open
 hall, a scan full of people, the first seconds) keeps the odometry's prediction. All poses
 are the laser's ``(x, y, theta)``, metres and radians.
@@ -59,6 +71,8 @@ class TrackingParams:
         refresh_distance: metres from the window's centre at which it is remade.
         refresh_scans: integrated scans after which the window is remade.
         max_distance: metres, where the likelihood field's distances are clipped.
+        prior_translation: the prior's translation weight times metres (0: no prior).
+        prior_rotation: the prior's rotation weight times radians (0: no prior).
     """
 
     match: MatchParams = field(default_factory=lambda: MatchParams(angular_window=0.4, min_fit=0.8))
@@ -72,8 +86,14 @@ class TrackingParams:
     refresh_distance: float = 2.0
     refresh_scans: int = 5
     max_distance: float = 1.0
+    prior_translation: float = 0.15
+    prior_rotation: float = 0.02
 
     def __post_init__(self) -> None:
+        for name in ("prior_translation", "prior_rotation"):
+            w = getattr(self, name)
+            if not (math.isfinite(w) and w >= 0):
+                raise ValueError(f"TrackingParams.{name} must be a finite number >= 0, got {w!r}")
         for name in ("max_range", "resolution", "window", "refresh_distance", "max_distance"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
@@ -136,6 +156,7 @@ class PoseTracker:
         self._last_integrated: np.ndarray | None = None
         self._last_pose: np.ndarray | None = None
         self._last_step: np.ndarray | None = None
+        self._last_odom: np.ndarray | None = None
         self._window_centre: np.ndarray | None = None
         self._since_refresh = 0
         self.scans = 0
@@ -170,8 +191,10 @@ class PoseTracker:
         )
         pose, fit, matched, searched = predicted, 0.0, False, False
         mf = self._field_for(predicted)
+        weights = self._prior_weights(o)
+        self._last_odom = o.copy()
         if mf is not None and pts.shape[0] >= 10:
-            res = self.matcher.match(mf, pts, mf.field.to_map(predicted))
+            res = self.matcher.match(mf, pts, mf.field.to_map(predicted), weights=weights)
             # odometry that stalled and then jumped (a turn of 1.5 rad between two scans on
             # the CSAIL log) gives a prediction no search window reaches: when the fit is
             # poor, the motion the tracker saw last is tried as well
@@ -179,7 +202,9 @@ class PoseTracker:
                 steady = compose(self._last_pose, self._last_step)
                 d = between(steady, predicted)
                 if math.hypot(d[0], d[1]) > prm.match.linear_window or abs(d[2]) > prm.match.angular_window:
-                    alt = self.matcher.match(mf, pts, mf.field.to_map(steady), search=True)
+                    alt = self.matcher.match(
+                        mf, pts, mf.field.to_map(steady), search=True, weights=(0.0, 0.0)
+                    )
                     if alt.fit > res.fit:
                         res = alt
             fit, searched = res.fit, res.searched
@@ -200,6 +225,16 @@ class PoseTracker:
             integrated = True
         self.scans += 1
         return TrackStep(pose, self.correction.copy(), fit, matched, searched, integrated)
+
+    def _prior_weights(self, odom: np.ndarray) -> tuple[float, float]:
+        """The prior's (translation, rotation) weights for this scan (see the module docstring)."""
+        prm = self.params
+        if self._last_odom is None:
+            d, a = 0.0, 0.0
+        else:
+            inc = between(self._last_odom, odom)
+            d, a = math.hypot(inc[0], inc[1]), abs(float(inc[2]))
+        return prm.prior_translation / (d + 0.01), prm.prior_rotation / (a + 0.01)
 
     def _should_integrate(self, pose: np.ndarray) -> bool:
         if self._last_integrated is None:

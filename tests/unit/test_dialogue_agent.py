@@ -346,19 +346,14 @@ def test_follow_me_follows_the_pipelines_people_and_is_refused_without_them() ->
 
 
 @dataclass
-class _Tracker:
-    correction: Any
-
-
-@dataclass
 class TrackedWorld(World):
-    tracker: _Tracker | None = None
+    correction: Any = None  # Pipeline.correction: the map -> odom transform of the latest scan
 
 
 def test_goals_go_to_the_base_in_the_odometry_frame_when_the_pipeline_tracks_its_pose() -> None:
     world, corridor, _, room = office()
     # the map is the odometry frame moved 1 m along x and turned a quarter turn: map = C ⊕ odom
-    tracked = TrackedWorld(world.graph, world.areas, _Tracker(np.array([1.0, 0.0, math.pi / 2])))
+    tracked = TrackedWorld(world.graph, world.areas, np.array([1.0, 0.0, math.pi / 2]))
     agent, _ = agent_for(tracked)  # type: ignore[arg-type]
     world.graph.current = corridor[0]
     handle(agent, intent("assert_object", object="charging station"))

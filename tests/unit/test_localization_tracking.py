@@ -108,3 +108,70 @@ def test_a_match_never_ends_further_than_the_window_from_its_prior(setting: tupl
         assert moved <= prm.linear_window + max(prm.sigmas) + 1e-9
         if dx < prm.linear_window:
             assert np.hypot(*(lf.to_world(res.pose)[:2] - truth[5][:2])) < 0.05  # within reach: found
+
+
+def _long_corridor() -> tuple[LikelihoodField, np.ndarray]:
+    """A 30 m corridor, 2 m wide, with one post in the middle at x = 15 m; and a scan from
+    (12, 1, 0) that sees the walls from x = 7 to 17 m and, 0.1 m beyond the post, a person
+    standing where the map has nothing (the post itself hidden behind them)."""
+    from knowledge.metric.grid import OccupancyGrid
+
+    res = 0.05
+    occ = np.zeros((int(2.4 / res), int(30 / res)), dtype=bool)
+    occ[: int(0.2 / res), :] = True
+    occ[-int(0.2 / res) :, :] = True
+    occ[int(1.1 / res) : int(1.3 / res), int(15.0 / res) : int(15.2 / res)] = True  # the post
+    grid = OccupancyGrid.from_masks(occ[::-1], res, name="corridor")
+    xs = np.arange(7.0, 17.0, 0.1)
+    walls = np.concatenate(
+        [np.stack([xs, np.full_like(xs, 0.2)], 1), np.stack([xs, np.full_like(xs, 2.2)], 1)]
+    )
+    person = np.array(
+        [[15.3 + dx, 1.2 + dy] for dx in (0.0, 0.05, 0.1) for dy in (-0.1, -0.05, 0.0, 0.05, 0.1)]
+    )
+    # the same post-sized blob, repeated so it weighs like the legs of a person close by
+    pts = np.concatenate([walls, np.repeat(person, 3, axis=0)]) - np.array([12.0, 1.0])
+    return LikelihoodField.from_grid(grid, 1.0), pts
+
+
+def test_the_odometry_prior_keeps_a_corridor_match_from_sliding_onto_a_person() -> None:
+    """Along a featureless corridor a blob that looks like a mapped post drags a plain match
+    a quarter of a metre back; the prior (Cartographer-style translation weight) keeps the pose where it was,
+    and across the corridor, where the walls decide, it still corrects an offset."""
+    lf, pts = _long_corridor()
+    truth = np.array([12.0, 1.0, 0.0])
+    plain = ScanMatcher(MatchParams(angular_window=0.4, min_fit=0.8))
+    weighed = ScanMatcher(
+        MatchParams(angular_window=0.4, min_fit=0.8, translation_weight=10.0, rotation_weight=2.0)
+    )
+    slid = lf.to_world(plain.match(plain.field(lf), pts, lf.to_map(truth), search=True).pose)
+    assert slid[0] - truth[0] < -0.15  # the person pulled the plain match back along the corridor
+    kept = lf.to_world(weighed.match(weighed.field(lf), pts, lf.to_map(truth), search=True).pose)
+    assert abs(kept[0] - truth[0]) < 0.05 and abs(kept[1] - truth[1]) < 0.03
+    # an offset across the corridor is still corrected with the prior on
+    off = truth + np.array([0.0, 0.12, 0.0])
+    fixed = lf.to_world(weighed.match(weighed.field(lf), pts, lf.to_map(off)).pose)
+    assert abs(fixed[1] - truth[1]) < 0.03
+    # per-scan weights override the parameters', and are checked
+    again = lf.to_world(
+        plain.match(plain.field(lf), pts, lf.to_map(truth), search=True, weights=(10.0, 2.0)).pose
+    )
+    np.testing.assert_allclose(again, kept, atol=1e-9)
+    with pytest.raises(ValueError, match="weights"):
+        plain.match(plain.field(lf), pts, lf.to_map(truth), weights=(-1.0, 0.0))
+    with pytest.raises(ValueError, match="translation_weight"):
+        MatchParams(translation_weight=float("nan"))
+
+
+def test_the_tracker_weighs_its_prior_by_the_odometry_increment() -> None:
+    from knowledge.localization.tracking import TrackingParams
+
+    t = PoseTracker(TrackingParams(prior_translation=0.15, prior_rotation=0.02))
+    assert t._prior_weights(np.zeros(3)) == pytest.approx((15.0, 2.0))  # first scan: standing
+    t._last_odom = np.zeros(3)
+    still = t._prior_weights(np.array([0.01, 0.0, 0.0]))
+    fast = t._prior_weights(np.array([0.2, 0.0, 0.3]))
+    assert still[0] == pytest.approx(7.5) and fast[0] == pytest.approx(0.15 / 0.21)
+    assert fast[1] == pytest.approx(0.02 / 0.31) and fast[1] < still[1]
+    with pytest.raises(ValueError, match="prior_translation"):
+        TrackingParams(prior_translation=-1.0)

@@ -25,7 +25,17 @@ def test_the_configuration_turns_tracking_on_and_recordings_keep_it() -> None:
     cfg = load_config(table={"localization": {"tracking": True, "beam_step": 3}}, env={})
     params = PipelineParams.from_config(cfg)
     assert params.localization == TrackingParams(beam_step=3)
+    assert params.tracking_lag == 3  # the tracker runs on its own thread by default
     assert PipelineParams.from_table(params.to_table()) == params
+    inline = PipelineParams.from_config(
+        load_config(table={"localization": {"tracking": True, "lag": 0}}, env={})
+    )
+    assert inline.tracking_lag == 0 and "tracking_lag" not in inline.to_table()
+    assert PipelineParams.from_table(inline.to_table()) == inline
+    with pytest.raises(ConfigError, match="tracking_lag"):
+        PipelineParams.from_table({**params.to_table(), "tracking_lag": -1})
+    with pytest.raises(ConfigError, match="lag"):
+        load_config(table={"localization": {"tracking": True, "lag": 1.5}}, env={})
     with pytest.raises(ConfigError, match="unknown key 'trackin'"):
         load_config(table={"localization": {"trackin": True}}, env={})
 
@@ -57,6 +67,46 @@ def test_tracking_in_the_pipeline_corrects_drifting_odometry() -> None:
     assert on.messages()[0]["frame_id"] == "map" and off.messages()[0]["frame_id"] == "odom"
     assert graph_message(on.state_document(), 0.0)["frame_id"] == "odom"  # the default stays
     assert math.isfinite(float(a.correction[2]))
+
+
+@pytest.mark.parametrize("lag", [1, 3])
+def test_the_tracker_on_its_own_thread_corrects_scan_k_with_scan_k_minus_lag(lag: int) -> None:
+    """Off the per-scan path, the tracker's result is used ``lag`` scans later: exactly the
+    inline tracker's correction of scan k − lag, so a replay reproduces a live run."""
+    g = world()
+    truth = path(0.1)
+    R = scans(g, truth)
+    odo = compose(truth[0], drifting_odometry(truth, drift=0.03, scale=1.04))
+    model = PlaceModel.load(default_model_path())
+    inline = Pipeline(model, PipelineParams(localization=TrackingParams(), people=_no_people()))
+    runs = [
+        Pipeline(model, PipelineParams(localization=TrackingParams(), people=_no_people(), tracking_lag=lag))
+        for _ in range(2)
+    ]
+    ref, got = [], [[], []]
+    try:
+        for i in range(len(truth)):
+            scan = LaserScan(
+                float(i), i, "laser", float(ANGLES[0]), float(ANGLES[1] - ANGLES[0]), RANGE_MAX, R[i]
+            )
+            pose = Pose2D(*odo[i], stamp=float(i))
+            ref.append(inline.process(scan, pose).correction)
+            for run, out in zip(runs, got, strict=True):
+                r = run.process(scan, pose)
+                assert r.pose.frame_id == "map"
+                out.append((r.correction, (r.pose.x, r.pose.y, r.pose.theta)))
+    finally:
+        for run in runs:
+            run.close()
+    for out in got:
+        for k, (corr, _) in enumerate(out):
+            expected = np.zeros(3) if k < lag else ref[k - lag]
+            np.testing.assert_array_equal(corr, expected)
+    # two runs of the same input: the same poses, whatever the thread's timing was
+    assert [p for _, p in got[0]] == [p for _, p in got[1]]
+    err = np.hypot(*(np.array([p for _, p in got[0]])[:, :2] - truth[:, :2]).T)
+    assert err.max() < 0.3  # a few scans' worth of drift more than inline at most
+    assert len(truth) - lag <= len(runs[0].tracking_ms) <= len(truth)  # close() drops what had not started
 
 
 def _no_people():  # type: ignore[no-untyped-def]

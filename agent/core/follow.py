@@ -24,7 +24,12 @@ Behaviour:
   round the corner; a new confirmed track seen within ``reacquire_radius`` metres of the
   target's constant-velocity prediction (extrapolated at most ``max_prediction`` seconds),
   plus ``search_speed`` metres per second since the target was last seen, takes over as the
-  target — the same person under a new id.
+  target — the same person under a new id. So may an older track that was within
+  ``sibling_radius`` metres of the target the last time the target was seen: the same
+  person tracked twice (the legs of a tutor standing with feet apart were tracked apart and
+  the target's track died while the other lived on; in the noisy-odometry tour this made
+  the robot stand 1 m from its tutor and say "I lost you"). Someone further away then,
+  another person, still cannot take over.
 * When the target has not been seen for ``lost_after`` seconds → **lost**: no goal,
   ``cancel`` once (the base should stop) and the message ``"I lost you."`` once. Lost is
   final until :meth:`FollowMe.start` is called again. A target whose track vanished and
@@ -75,6 +80,8 @@ class FollowParams:
         chase_for: seconds added to ``lost_after`` while the robot drives after a vanished
             target (>= 0).
         max_search_radius: metres; the reacquisition radius grows no further (> 0).
+        sibling_radius: metres; a track this near the target when it was last seen may take
+            over although it is older (>= 0; 0: only tracks born since).
     """
 
     distance: float = 1.0
@@ -90,6 +97,7 @@ class FollowParams:
     search_speed: float = 0.6
     chase_for: float = 4.0
     max_search_radius: float = 2.5
+    sibling_radius: float = 1.0
 
     def __post_init__(self) -> None:
         for name in (
@@ -110,6 +118,7 @@ class FollowParams:
             "chase_short",
             "search_speed",
             "chase_for",
+            "sibling_radius",
         ):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
@@ -176,6 +185,7 @@ class FollowMe:
         self._goal: Pose | None = None
         self._stamp: float | None = None
         self._chased = False  # drove to the vanished target's last position already
+        self._siblings: frozenset[int] = frozenset()  # tracks near the target when last seen
 
     @property
     def active(self) -> bool:
@@ -203,6 +213,7 @@ class FollowMe:
         self._state = "searching"
         self._target = None
         self._goal = None
+        self._siblings = frozenset()
         self._started = float(stamp)
         self._stamp = None
 
@@ -240,6 +251,14 @@ class FollowMe:
             track = self._find_target(tracks, stamp)
         if track is not None and track.misses == 0:
             self._last_seen = float(stamp)
+            r = self.params.sibling_radius
+            self._siblings = frozenset(
+                t.id
+                for t in tracks
+                if t.id != track.id
+                and float(np.hypot(*(np.asarray(t.position, dtype=np.float64) - np.asarray(track.position))))
+                <= r
+            )
         chase: Pose | None = None
         if track is None and not self._chased:  # vanished, maybe round a corner: go and look
             self._chased = True
@@ -295,8 +314,8 @@ class FollowMe:
             self.params.reacquire_radius + self.params.search_speed * unseen, self.params.max_search_radius
         )
         for t in tracks:
-            if t.misses > 0 or t.first_seen < self._last_seen:
-                continue  # only tracks born after the target was last seen can be it
+            if t.misses > 0 or (t.first_seen < self._last_seen and t.id not in self._siblings):
+                continue  # only tracks born after the target was last seen, or near it then, can be it
             d = float(np.hypot(*(np.asarray(t.position, dtype=np.float64) - predicted)))
             if d <= best_d:
                 best, best_d = t, d

@@ -225,6 +225,26 @@ def test_reacquires_a_new_track_near_the_predicted_position() -> None:
     assert step.state == "following"  # seen again: the lost clock restarted
 
 
+def test_the_same_person_tracked_twice_keeps_being_followed_when_the_target_track_dies() -> None:
+    """The tutor's legs tracked apart: track 1 (the target) dies, track 2, as old, lived
+    beside it and takes over; someone who was 2 m from the target then does not."""
+    f = started()
+    for k in range(11):
+        t = 0.1 * k
+        f.update(
+            [track(1, 2.0, 0.0), track(2, 2.3, 0.4, first_seen=0.0), track(3, 2.0, 2.2, first_seen=0.0)],
+            ORIGIN,
+            t,
+        )
+    # track 1 gone; the other two stay where they were, track 3 now nearer the prediction
+    step = f.update([track(3, 2.2, 0.9, first_seen=0.0), track(2, 2.3, 0.5, first_seen=0.0)], ORIGIN, 1.1)
+    assert (step.state, step.target_track) == ("following", 2)
+    f = started(sibling_radius=0.0)  # without: only tracks born since may take over
+    for k in range(11):
+        f.update([track(1, 2.0, 0.0), track(2, 2.3, 0.4, first_seen=0.0)], ORIGIN, 0.1 * k)
+    assert f.update([track(2, 2.3, 0.5, first_seen=0.0)], ORIGIN, 1.1).target_track == 1  # still the lost one
+
+
 def test_the_reacquisition_radius_grows_while_the_target_is_unseen() -> None:
     """A person who turned a corner reappears farther from the prediction the longer it took."""
     f = started(lost_after=3.0, reacquire_radius=0.8, search_speed=0.6, max_prediction=0.0)

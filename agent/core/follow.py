@@ -24,12 +24,15 @@ Behaviour:
   round the corner; a new confirmed track seen within ``reacquire_radius`` metres of the
   target's constant-velocity prediction (extrapolated at most ``max_prediction`` seconds),
   plus ``search_speed`` metres per second since the target was last seen, takes over as the
-  target — the same person under a new id. So may an older track that was within
-  ``sibling_radius`` metres of the target the last time the target was seen: the same
-  person tracked twice (the legs of a tutor standing with feet apart were tracked apart and
-  the target's track died while the other lived on; in the noisy-odometry tour this made
-  the robot stand 1 m from its tutor and say "I lost you"). Someone further away then,
-  another person, still cannot take over.
+  target — the same person under a new id. So may an older track that, the last time the
+  target was seen, was within ``sibling_radius`` metres of it or was not seen itself (a
+  track coasting on its prediction): the same person tracked twice (the legs of a tutor
+  standing with feet apart tracked apart, the target's track dying while the other lives
+  on; in the noisy-odometry tour this made the robot stand 1 m from its tutor and say "I
+  lost you"). A track seen at the same time further from the target — another person —
+  still cannot take over. While the target's own track coasts (not seen, the tracker
+  still predicting it), a track that may take over does so at once: the robot follows the
+  person it sees, not a prediction drifting through the walls.
 * When the target has not been seen for ``lost_after`` seconds → **lost**: no goal,
   ``cancel`` once (the base should stop) and the message ``"I lost you."`` once. Lost is
   final until :meth:`FollowMe.start` is called again. A target whose track vanished and
@@ -251,13 +254,14 @@ class FollowMe:
             track = self._find_target(tracks, stamp)
         if track is not None and track.misses == 0:
             self._last_seen = float(stamp)
+            # tracks that may become the target although older: beside it now, or not seen now
             r = self.params.sibling_radius
+            here = np.asarray(track.position, dtype=np.float64)
             self._siblings = frozenset(
                 t.id
                 for t in tracks
                 if t.id != track.id
-                and float(np.hypot(*(np.asarray(t.position, dtype=np.float64) - np.asarray(track.position))))
-                <= r
+                and (t.misses > 0 or float(np.hypot(*(np.asarray(t.position, dtype=np.float64) - here))) <= r)
             )
         chase: Pose | None = None
         if track is None and not self._chased:  # vanished, maybe round a corner: go and look
@@ -272,8 +276,9 @@ class FollowMe:
                 self._goal = chase
             return FollowStep(chase, "following", self._target)
         self._chased = False
-        self._last_pos = np.asarray(track.position, dtype=np.float64).copy()
-        self._last_vel = np.asarray(track.velocity, dtype=np.float64).copy()
+        if track.misses == 0:  # where the person was seen, not where a coasting track drifts
+            self._last_pos = np.asarray(track.position, dtype=np.float64).copy()
+            self._last_vel = np.asarray(track.velocity, dtype=np.float64).copy()
         goal = goal_behind((float(track.position[0]), float(track.position[1])), pose, self.params.distance)
         ref = self._goal if self._goal is not None else pose
         if (
@@ -303,9 +308,12 @@ class FollowMe:
 
     def _find_target(self, tracks: list[TrackState], stamp: float) -> TrackState | None:
         """The target's track, or a new track near where the vanished target should be."""
+        coasting: TrackState | None = None
         for t in tracks:
             if t.id == self._target:
-                return t
+                if t.misses == 0:
+                    return t
+                coasting = t  # the tracker still predicts it: someone seen near there wins
         dt = min(max(0.0, stamp - self._last_seen), self.params.max_prediction)
         predicted = self._last_pos + dt * self._last_vel
         best: TrackState | None = None
@@ -314,14 +322,17 @@ class FollowMe:
             self.params.reacquire_radius + self.params.search_speed * unseen, self.params.max_search_radius
         )
         for t in tracks:
-            if t.misses > 0 or (t.first_seen < self._last_seen and t.id not in self._siblings):
-                continue  # only tracks born after the target was last seen, or near it then, can be it
+            if t.id == self._target or t.misses > 0:
+                continue
+            if t.first_seen < self._last_seen and t.id not in self._siblings:
+                continue  # only tracks born after the target was last seen, or beside it then, can be it
             d = float(np.hypot(*(np.asarray(t.position, dtype=np.float64) - predicted)))
             if d <= best_d:
                 best, best_d = t, d
         if best is not None:
             self._target = best.id
-        return best
+            return best
+        return coasting
 
     def _lose(self, message: str) -> FollowStep:
         self._state = "lost"

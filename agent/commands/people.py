@@ -161,7 +161,7 @@ def register(subparsers: Any) -> None:
     tk.add_argument(
         "--plain",
         action="store_true",
-        help="the plain tracker: no static cells, no free-space evidence (before issue 15; for comparison)",
+        help="the plain tracker: no static cells, no free-space evidence, no score floor (before issue 15; for comparison)",
     )
     tk.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     tk.set_defaults(handler=_track)
@@ -375,7 +375,7 @@ def _track(args: argparse.Namespace) -> int:
 
     det = LegDetector.load(args.model)
     pipe = (
-        PeoplePipeline(det, tracker=TrackerConfig(), static=None, min_seen_through=0)
+        PeoplePipeline(det, tracker=TrackerConfig(), static=None, min_seen_through=0, min_score=None)
         if args.plain
         else PeoplePipeline(det)
     )

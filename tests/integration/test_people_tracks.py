@@ -245,6 +245,26 @@ def test_track_and_evaluate_a_bag_from_the_command_line(walk_bag: tuple[Path, in
     assert bad.returncode != 0 and "missing.bag" in bad.stderr
 
 
+def test_track_takes_the_protocols_options(walk_bag: tuple[Path, int], tmp_path: Path) -> None:
+    """loci people track --min-score/--min-travel/--min-seen-through run the protocol's choice;
+    the tracks file's header records them; --plain takes none; a bad value is an error."""
+    path, _ = walk_bag
+    out = tmp_path / "tracks.jsonl"
+    proc = loci(
+        "people", "track", path, "--out", out, "--json",
+        "--min-score", "0.4", "--min-travel", "0.1", "--min-seen-through", "2",
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    header, frames = read_tracks(out)
+    assert header["options"] == {"min-score": 0.4, "min-travel": 0.1, "min-seen-through": 2}
+    assert header["command"].endswith("--min-score 0.4 --min-travel 0.1 --min-seen-through 2")
+    assert len(frames) == int(7.0 * RATE) and any(len(f.tracks) for f in frames)  # the walker moves
+    bad = loci("people", "track", path, "--out", out, "--plain", "--min-score", "0.4")
+    assert bad.returncode != 0 and "--plain takes none of --min-score" in bad.stderr
+    bad = loci("people", "track", path, "--out", out, "--min-travel", "-1")
+    assert bad.returncode != 0 and "min_travel" in bad.stderr
+
+
 def test_scans_read_once_track_as_the_recording_does(walk_bag: tuple[Path, int], tmp_path: Path) -> None:
     """An evaluation reads a recording once (recording_scans) and tracks it many times
     (track_scans): the same frames and accounting as track_recording, every time."""

@@ -245,6 +245,7 @@ def test_track_and_evaluate_a_bag_from_the_command_line(walk_bag: tuple[Path, in
     assert bad.returncode != 0 and "missing.bag" in bad.stderr
 
 
+@pytest.mark.slow
 def test_track_takes_the_protocols_options(walk_bag: tuple[Path, int], tmp_path: Path) -> None:
     """loci people track --min-score/--min-travel/--min-seen-through run the protocol's choice;
     the tracks file's header records them; --plain takes none; a bad value is an error."""

@@ -23,7 +23,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -41,11 +41,14 @@ __all__ = [
     "TrackRun",
     "TrackScores",
     "bag_examples",
+    "bag_segments",
     "read_annotations",
     "read_bag_scans",
     "read_tracks",
+    "recording_scans",
     "score_tracks",
     "track_recording",
+    "track_scans",
     "write_tracks",
 ]
 
@@ -155,8 +158,47 @@ def track_recording(
     Raises:
         DataError: not an MCAP recording, or no scans of the robot.
     """
+    run = TrackRun()
+    return track_scans(recording_scans(path, run, robot=robot, progress=progress), pipeline, run)
+
+
+def track_scans(
+    scans: Iterable[tuple[Any, tuple[float, float, float]]], pipeline: Any, run: TrackRun
+) -> TrackRun:
+    """Hand each ``(scan, laser pose)`` to ``pipeline`` and append its frame to ``run`` (returned).
+
+    :func:`track_recording` is this over :func:`recording_scans`; an evaluation that tracks one
+    recording many times reads it once (``list(recording_scans(...))``) and calls this with a
+    copy of the run's accounting each time: the frames are the same.
+    """
     import time
 
+    for scan, pose in scans:
+        t0 = time.perf_counter()
+        fr = pipeline.process_scan(scan, sensor_pose=pose)
+        run.seconds_people += time.perf_counter() - t0
+        tracks = np.array(
+            [(t.id, t.position[0], t.position[1], t.misses, t.travelled) for t in fr.tracks],
+            dtype=np.float64,
+        ).reshape(-1, 5)
+        run.frames.append(TrackFrame(fr.stamp, pose, fr.people.positions.copy(), tracks))
+    return run
+
+
+def recording_scans(
+    path: str | Path,
+    run: TrackRun,
+    *,
+    robot: str | None = None,
+    progress: Callable[[int, int | None], None] | None = None,
+) -> Iterator[tuple[Any, tuple[float, float, float]]]:
+    """The scans of a recording with the laser's odometry pose, as the agent matches them (see
+    the module doc), in order; ``run``'s accounting (scans, odometry, drops, mount, robot) is
+    filled in while they are read (complete once the iterator is exhausted).
+
+    Raises:
+        DataError: not an MCAP recording, or no scans of the robot.
+    """
     from agent.bus.codecs import LASER_SCAN_CODEC, POSE_CODEC, checked_decode
     from agent.bus.keys import RobotKeys
     from agent.core.odom_sync import DROP_REASONS, OdomSync, SyncParams
@@ -187,28 +229,23 @@ def track_recording(
         PipelineParams.from_table(json.loads(meta["pipeline"])) if meta.get("pipeline") else PipelineParams()
     )
     sync = OdomSync(recorded_sync_params(meta) or SyncParams(reorder=FOREIGN_REORDER))
-    run = TrackRun(mount=tuple(float(v) for v in params.mount), robot=robot)  # type: ignore[arg-type]
+    run.mount = tuple(float(v) for v in params.mount)  # type: ignore[assignment]
+    run.robot = robot
     total = _message_count(p, keys.scan)
 
-    def feed(matched: Iterable[Any]) -> None:
+    def posed(matched: Iterable[Any]) -> Iterator[tuple[Any, tuple[float, float, float]]]:
         for m in matched:
             sensor = compose(m.pose, params.mount)
-            pose = (float(sensor[0]), float(sensor[1]), float(sensor[2]))
-            t0 = time.perf_counter()
-            fr = pipeline.process_scan(m.scan, sensor_pose=pose)
-            run.seconds_people += time.perf_counter() - t0
-            tracks = np.array(
-                [(t.id, t.position[0], t.position[1], t.misses, t.travelled) for t in fr.tracks],
-                dtype=np.float64,
-            ).reshape(-1, 5)
-            run.frames.append(TrackFrame(fr.stamp, pose, fr.people.positions.copy(), tracks))
+            yield m.scan, (float(sensor[0]), float(sensor[1]), float(sensor[2]))
 
     for msg in McapMessages(p, topics={keys.scan, keys.odom}):
         now = msg.log_time_ns * 1e-9
         try:
             if msg.topic == keys.odom:
                 run.odometry += 1
-                feed(sync.add_odom(checked_decode(POSE_CODEC, msg.zenoh_encoding, msg.data, msg.topic), now))
+                yield from posed(
+                    sync.add_odom(checked_decode(POSE_CODEC, msg.zenoh_encoding, msg.data, msg.topic), now)
+                )
                 continue
             run.scans += 1
             scan = checked_decode(LASER_SCAN_CODEC, msg.zenoh_encoding, msg.data, msg.topic)
@@ -216,15 +253,14 @@ def track_recording(
             if msg.topic == keys.scan:
                 run.invalid += 1
             continue
-        feed(sync.add_scan(scan, now))
+        yield from posed(sync.add_scan(scan, now))
         if progress is not None:
             progress(run.scans, total)
-    feed(sync.close())
+    yield from posed(sync.close())
     if run.scans == 0:
         raise DataError(f"{p}: no {keys.scan} messages")
     stats = sync.stats.as_dict()
     run.dropped = {r: int(stats.get(r, 0)) for r in DROP_REASONS if stats.get(r, 0)}
-    return run
 
 
 def write_tracks(path: Path, run: TrackRun, header: dict[str, Any]) -> None:
@@ -506,6 +542,26 @@ def bag_examples(
     after its first scan (:func:`knowledge.people.dataset.label_person_annotations`: legs
     near an annotated person are people, segments in the arc far from everyone are not).
     """
+    X, y, dist, t, scans = bag_segments(path, arc_deg=arc_deg, jump=jump, max_gap=max_gap)
+    keep = (window[0] <= t) & (t < window[1])
+    used = int(((window[0] <= scans) & (scans < window[1])).sum())
+    if not used:
+        raise DataError(f"{path}: no scan in the window {window[0]:g}-{window[1]:g} s after the first scan")
+    X, y, dist = X[keep], y[keep], dist[keep]
+    return X, y, dist, {"scans": used, "people": int(y.sum()), "non_people": int((~y).sum())}
+
+
+def bag_segments(
+    path: str | Path,
+    *,
+    arc_deg: tuple[float, float] | None = BENCHMARK_ARC,
+    jump: float = 0.15,
+    max_gap: int | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Every labelled segment of an annotated bag (see :func:`bag_examples`) with its time:
+    ``(X (n, 14), y (n,) bool, distance (n,), t (n,), scan_t (S,))``, ``t`` and ``scan_t`` the
+    seconds after the bag's first scan of each segment's scan and of every scan (so that
+    parts split by time are cut from one read of the bag)."""
     from knowledge.people.dataset import POSITIVE, label_person_annotations
     from knowledge.people.features import _features
     from knowledge.people.segmentation import segment_scan
@@ -513,12 +569,8 @@ def bag_examples(
     truth = read_annotations(path)
     scans = read_bag_scans(path)
     t0 = float(truth.scan_stamps[0]) if truth.scan_stamps.size else 0.0
-    Xs, ys, ds = [], [], []
-    used = 0
+    Xs, ys, ds, ts = [], [], [], []
     for scan in scans:
-        if not (window[0] <= scan.stamp - t0 < window[1]):
-            continue
-        used += 1
         seg = segment_scan(
             scan.ranges,
             scan.angle_min,
@@ -535,10 +587,11 @@ def bag_examples(
         Xs.append(X[keep])
         ys.append(labels[keep] == POSITIVE)
         ds.append(np.hypot(centre[keep, 0], centre[keep, 1]))
+        ts.append(np.full(int(keep.sum()), scan.stamp - t0))
     if not Xs:
-        raise DataError(f"{path}: no scan in the window {window[0]:g}-{window[1]:g} s after the first scan")
-    X, y, dist = np.concatenate(Xs), np.concatenate(ys), np.concatenate(ds)
-    return X, y, dist, {"scans": used, "people": int(y.sum()), "non_people": int((~y).sum())}
+        raise DataError(f"{path}: no scans")
+    scan_t = np.array([s.stamp - t0 for s in scans], dtype=np.float64)
+    return np.concatenate(Xs), np.concatenate(ys), np.concatenate(ds), np.concatenate(ts), scan_t
 
 
 def _scan_topic(src: Path, conns: dict[str, Any], wanted: str | None) -> str:

@@ -87,7 +87,7 @@ def run_seed(seed: int, tracker: str, det: LegDetector, params: FollowParams | N
     scans: list[Any] = []
     robot.scan_listeners.append(scans.append)
     pipe = (
-        PeoplePipeline(det, tracker=TrackerConfig(), static=None, min_seen_through=0)
+        PeoplePipeline(det, tracker=TrackerConfig(), static=None, min_seen_through=0, min_score=None)
         if tracker == "plain"
         else PeoplePipeline(det)
     )

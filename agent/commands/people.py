@@ -161,7 +161,25 @@ def register(subparsers: Any) -> None:
     tk.add_argument(
         "--plain",
         action="store_true",
-        help="the plain tracker: no static cells, no free-space evidence (before issue 15; for comparison)",
+        help="the plain tracker: no static cells, no free-space evidence, no score floor (before issue 15; for comparison)",
+    )
+    tk.add_argument(
+        "--min-score",
+        type=float,
+        metavar="F",
+        help="a leg needs the detector's output F >= this (default: the detector's threshold)",
+    )
+    tk.add_argument(
+        "--min-travel",
+        type=float,
+        metavar="M",
+        help="a new track is confirmed only once it moved M metres from where it was born (default 0)",
+    )
+    tk.add_argument(
+        "--min-seen-through",
+        type=int,
+        metavar="N",
+        help="scans that must have seen through a detection for it to be evidence of motion (default 3)",
     )
     tk.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     tk.set_defaults(handler=_track)
@@ -367,18 +385,50 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _track(args: argparse.Namespace) -> int:
+    import dataclasses
+
     from agent.people_tracks import track_recording, write_tracks
     from agent.progress import Progress
+    from knowledge.errors import ConfigError
     from knowledge.people.detector import LegDetector
-    from knowledge.people.pipeline import PeoplePipeline
+    from knowledge.people.pipeline import (
+        DEFAULT_MIN_SCORE,
+        DEFAULT_MIN_SEEN_THROUGH,
+        DEFAULT_TRACKER,
+        PeoplePipeline,
+    )
     from knowledge.people.tracking import TrackerConfig
 
     det = LegDetector.load(args.model)
-    pipe = (
-        PeoplePipeline(det, tracker=TrackerConfig(), static=None, min_seen_through=0)
-        if args.plain
-        else PeoplePipeline(det)
-    )
+    options = {
+        k: v
+        for k, v in (
+            ("--min-score", args.min_score),
+            ("--min-travel", args.min_travel),
+            ("--min-seen-through", args.min_seen_through),
+        )
+        if v is not None
+    }
+    if args.plain and options:
+        raise ConfigError(f"--plain takes none of {', '.join(options)}")
+    try:
+        pipe = (
+            PeoplePipeline(det, tracker=TrackerConfig(), static=None, min_seen_through=0, min_score=None)
+            if args.plain
+            else PeoplePipeline(
+                det,
+                tracker=dataclasses.replace(
+                    DEFAULT_TRACKER,
+                    min_travel=DEFAULT_TRACKER.min_travel if args.min_travel is None else args.min_travel,
+                ),
+                min_seen_through=DEFAULT_MIN_SEEN_THROUGH
+                if args.min_seen_through is None
+                else args.min_seen_through,
+                min_score=DEFAULT_MIN_SCORE if args.min_score is None else args.min_score,
+            )
+        )
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from exc
     src = args.recording
     with Progress() as progress:
         if src.suffix == ".bag":  # ROS 1: import into a temporary recording first
@@ -399,8 +449,12 @@ def _track(args: argparse.Namespace) -> int:
     header = {
         "recording": str(src),
         "model": str(args.model) if args.model else "bundled",
-        "tracker": "plain" if args.plain else "default",
-        "command": "loci people track " + str(src) + (" --plain" if args.plain else ""),
+        "tracker": "plain" if args.plain else ("default" if not options else "default with options"),
+        "options": {k.lstrip("-"): v for k, v in options.items()},
+        "command": "loci people track "
+        + str(src)
+        + (" --plain" if args.plain else "")
+        + "".join(f" {k} {v:g}" for k, v in options.items()),
     }
     write_tracks(args.out, run, header)
     n_tracks = len({int(i) for f in run.frames for i in f.tracks[:, 0]})

@@ -25,7 +25,10 @@ Each scan (:meth:`PeopleTracker.update`):
    place a moment before, :mod:`knowledge.people.freespace`, so someone walked in), or once
    it has moved ``confirm_travel`` metres from where it was born (someone walking away from
    the laser hides their own next position, so the laser never sees through it); a
-   tentative track that misses ``tentative_misses`` scans in a row is dropped. Detections
+   tentative track that misses ``tentative_misses`` scans in a row is dropped. With
+   ``min_travel`` > 0 a new track must also have moved that far from where it was born before it
+   is confirmed, whatever its evidence (a table leg stays put; so, measured on the benchmark
+   bag, does a person standing in a group: docs/people.md). Detections
    the caller marks as no *birth* (e.g. on cells the laser has hit for seconds: furniture,
    :mod:`knowledge.people.static`) may feed confirmed tracks — a person who walked up and
    stands still stays tracked — but neither start nor feed tentative ones;
@@ -72,6 +75,7 @@ class TrackerConfig:
     max_occluded: float = 0.0
     revive_radius: float = 0.0
     revive_for: float = 0.0
+    min_travel: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("gate", "accel_std", "meas_std", "init_speed_std"):
@@ -88,7 +92,7 @@ class TrackerConfig:
             raise ValueError(
                 f"TrackerConfig.confirm_travel must be None or a positive number, got {self.confirm_travel!r}"
             )
-        for name in ("revive_radius", "revive_for"):
+        for name in ("revive_radius", "revive_for", "min_travel"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"TrackerConfig.{name} must be a number >= 0, got {v!r}")
@@ -441,8 +445,9 @@ class PeopleTracker:
                     revived = self._revive(tr, t)
                     if revived:
                         tr.id = revived
-                    elif tr.evidence >= cfg.confirm_evidence or (
-                        cfg.confirm_travel is not None and tr.travelled >= cfg.confirm_travel
+                    elif tr.travelled >= cfg.min_travel and (
+                        tr.evidence >= cfg.confirm_evidence
+                        or (cfg.confirm_travel is not None and tr.travelled >= cfg.confirm_travel)
                     ):
                         tr.id = self._next_id
                         self._next_id += 1
@@ -456,7 +461,7 @@ class PeopleTracker:
                 x, y = zs[k]
                 tr = _Track(x, y, 0.0, 0.0, p0, 0.0, v0, p0, 0.0, v0, born=t, last_seen=t, x0=x, y0=y)
                 tr.evidence = int(ev[k])
-                if cfg.confirm_hits <= 1 and tr.evidence >= cfg.confirm_evidence:
+                if cfg.confirm_hits <= 1 and tr.evidence >= cfg.confirm_evidence and cfg.min_travel == 0:
                     tr.id = self._next_id
                     self._next_id += 1
                 survivors.append(tr)

@@ -20,13 +20,20 @@ from support.cli import loci
 from agent.people_tracks import (
     TrackFrame,
     TrackRun,
+    bag_examples,
+    bag_segments,
     read_annotations,
     read_tracks,
+    recording_scans,
     score_tracks,
+    track_recording,
+    track_scans,
     write_tracks,
 )
+from agent.recording.importer import import_log
 from knowledge.errors import DataError
 from knowledge.metric.grid import OccupancyGrid
+from knowledge.people.pipeline import PeoplePipeline
 from sim.lms_world import LmsWorld
 from sim.people import SimPerson
 
@@ -236,6 +243,60 @@ def test_track_and_evaluate_a_bag_from_the_command_line(walk_bag: tuple[Path, in
     assert "MOTA" in text.stdout and "precision" in text.stdout
     bad = loci("people", "evaluate-tracks", out, "--truth", tmp_path / "missing.bag")
     assert bad.returncode != 0 and "missing.bag" in bad.stderr
+
+
+@pytest.mark.slow
+def test_track_takes_the_protocols_options(walk_bag: tuple[Path, int], tmp_path: Path) -> None:
+    """loci people track --min-score/--min-travel/--min-seen-through run the protocol's choice;
+    the tracks file's header records them; --plain takes none; a bad value is an error."""
+    path, _ = walk_bag
+    out = tmp_path / "tracks.jsonl"
+    proc = loci(
+        "people", "track", path, "--out", out, "--json",
+        "--min-score", "0.4", "--min-travel", "0.1", "--min-seen-through", "2",
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    header, frames = read_tracks(out)
+    assert header["options"] == {"min-score": 0.4, "min-travel": 0.1, "min-seen-through": 2}
+    assert header["command"].endswith("--min-score 0.4 --min-travel 0.1 --min-seen-through 2")
+    assert len(frames) == int(7.0 * RATE) and any(len(f.tracks) for f in frames)  # the walker moves
+    bad = loci("people", "track", path, "--out", out, "--plain", "--min-score", "0.4")
+    assert bad.returncode != 0 and "--plain takes none of --min-score" in bad.stderr
+    bad = loci("people", "track", path, "--out", out, "--min-travel", "-1")
+    assert bad.returncode != 0 and "min_travel" in bad.stderr
+
+
+def test_scans_read_once_track_as_the_recording_does(walk_bag: tuple[Path, int], tmp_path: Path) -> None:
+    """An evaluation reads a recording once (recording_scans) and tracks it many times
+    (track_scans): the same frames and accounting as track_recording, every time."""
+    path, _ = walk_bag
+    rec = tmp_path / "walk.mcap"
+    import_log(path, rec, fmt="ros1")
+    direct = track_recording(rec, PeoplePipeline())
+    acc = TrackRun()
+    scans = list(recording_scans(rec, acc))
+    assert acc.scans == len(scans) == int(7.0 * RATE) and acc.odometry > 0
+    for _ in range(2):
+        again = track_scans(scans, PeoplePipeline(), TrackRun(**{**acc.__dict__, "frames": []}))
+        assert again.summary() | {"people_seconds": 0} == direct.summary() | {"people_seconds": 0}
+        assert [f.to_json() for f in again.frames] == [f.to_json() for f in direct.frames]
+    assert any(len(f.tracks) for f in direct.frames)
+
+
+def test_bag_segments_are_cut_by_time_as_bag_examples(walk_bag: tuple[Path, int]) -> None:
+    """One read of the bag (bag_segments, with each segment's time) gives the same training
+    examples for a window as bag_examples, and the two halves add up to the whole."""
+    path, _ = walk_bag
+    X, y, dist, t, scan_t = bag_segments(path)
+    assert scan_t.size == int(7.0 * RATE) and t.shape == y.shape == dist.shape and X.shape[0] == y.size
+    assert y.any() and (~y).any()
+    halves = [bag_examples(path, window=w) for w in ((-math.inf, 3.0), (3.0, math.inf))]
+    for (Xh, yh, _, counts), sel in zip(halves, (t < 3.0, t >= 3.0), strict=True):
+        assert np.array_equal(Xh, X[sel]) and np.array_equal(yh, y[sel])
+        assert counts["people"] == int(y[sel].sum())
+    assert sum(h[3]["scans"] for h in halves) == scan_t.size
+    with pytest.raises(DataError, match="no scan in the window"):
+        bag_examples(path, window=(100.0, 200.0))
 
 
 @pytest.mark.data

@@ -739,8 +739,8 @@ def test_pipeline_equals_the_reference_on_the_agents_drive(detector: LegDetector
 
     drive = DriveScans()
     chunk = drive.take(250)
-    # the reference chain has the plain tracker: no static cells, no free-space evidence
-    pipe = PeoplePipeline(detector, tracker=TrackerConfig(), static=None, min_seen_through=0)
+    # the reference chain has the plain tracker: no static cells, no free-space evidence, no score floor
+    pipe = PeoplePipeline(detector, tracker=TrackerConfig(), static=None, min_seen_through=0, min_score=None)
     tracker = RefTracker()
     n_tracks = n_legs = 0
     for i in range(len(chunk)):

@@ -219,9 +219,44 @@ def test_furniture_that_looks_like_legs_starts_no_track_and_a_walker_does() -> N
     det = LegDetector.load()
     n, scans, walker = furniture_and_a_walker(PeoplePipeline(det))
     n0, scans0, walker0 = furniture_and_a_walker(
-        PeoplePipeline(det, tracker=TrackerConfig(), static=None, min_seen_through=0)
+        PeoplePipeline(det, tracker=TrackerConfig(), static=None, min_seen_through=0, min_score=None)
     )
     print(f"furniture tracks: plain tracker {n0} in {scans0} scans, with evidence {n} in {scans}")
     assert walker and walker0
     assert n0 >= 1  # the plain tracker takes the stool's legs for people
     assert n == 0
+
+
+def test_min_score_drops_weak_legs_as_a_higher_detector_threshold_would() -> None:
+    """PeoplePipeline(min_score=s) keeps the segments with F >= s: the same legs, people and
+    tracks as a detector whose threshold is s, and its frame's detection marks only them."""
+    import copy
+
+    grid = room()
+    people = [SimPerson([(6.0, 3.0), (8.5, 6.5)], 1.0), SimPerson([(3.0, 7.0), (7.0, 8.0)], 0.8, phase=0.3)]
+    world = LmsWorld(grid, (5.0, 5.0, 0.0), legs_of(people), noise_std=0.01, seed=0)
+    det = LegDetector.load()
+    strict = copy.copy(det)
+    strict.threshold = 0.6
+    a, b, c = PeoplePipeline(det, min_score=0.6), PeoplePipeline(strict), PeoplePipeline(det)
+    dropped = 0
+    for i in range(30):
+        t = i / 7.5
+        r = world.ranges(t, n_beams=N_BEAMS, fov=FOV, max_range=RMAX, angle_min=ANGLE_MIN)
+        kw = {
+            "angle_min": ANGLE_MIN,
+            "angle_increment": INC,
+            "range_max": RMAX,
+            "sensor_pose": (5.0, 5.0, 0.0),
+        }
+        fa, fb, fc = a.process(r, t, **kw), b.process(r, t, **kw), c.process(r, t, **kw)
+        assert np.array_equal(fa.legs, fb.legs) and np.array_equal(
+            fa.detection.is_person, fb.detection.is_person
+        )
+        assert np.array_equal(fa.people.positions, fb.people.positions)
+        assert [(x.id, *x.position) for x in fa.tracks] == [(x.id, *x.position) for x in fb.tracks]
+        assert (fa.detection.score[fa.detection.is_person] >= 0.6).all()
+        dropped += len(fc.legs) - len(fa.legs)
+    assert dropped > 0  # some legs scored between 0 and 0.6: the option did something
+    with pytest.raises(ValueError, match="min_score"):
+        PeoplePipeline(det, min_score=float("nan"))

@@ -161,6 +161,26 @@ def test_confirmation_waits_for_evidence_or_travel() -> None:
     assert k >= 5  # not before it had walked that far
 
 
+def test_min_travel_keeps_a_track_that_stays_put_tentative_whatever_its_evidence() -> None:
+    cfg = TrackerConfig(confirm_hits=3, confirm_evidence=1, min_travel=0.2)
+    tr = PeopleTracker(cfg)
+    for k in range(10):  # a table leg with evidence at every scan: never confirmed
+        assert tr.update([[1.0, 0.0]], k * DT, evidence=[True]) == []
+    assert len(tr.tracks(include_tentative=True)) == 1
+    tr = PeopleTracker(cfg)  # a walker: confirmed once it has moved 0.2 m
+    out, k = [], 0
+    for k in range(10):
+        out = tr.update([[0.0, 0.05 * k]], k * DT, evidence=[True])
+        if out:
+            break
+    assert out and out[0].travelled >= 0.2 and k >= 4
+    # without min_travel the same table leg is confirmed after confirm_hits scans
+    tr = PeopleTracker(TrackerConfig(confirm_hits=3, confirm_evidence=1))
+    assert [len(tr.update([[1.0, 0.0]], k * DT, evidence=[True])) for k in range(3)] == [0, 0, 1]
+    with pytest.raises(ValueError, match="min_travel"):
+        TrackerConfig(min_travel=-0.1)
+
+
 def test_a_hidden_track_coasts_up_to_max_occluded_seconds() -> None:
     cfg = TrackerConfig(confirm_hits=2, max_misses=2, max_occluded=1.05)
     for hidden, survives in ((True, 10), (False, 2)):

@@ -43,6 +43,7 @@ without reasoning.
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import inspect
 import json
@@ -75,6 +76,9 @@ T = TypeVar("T")
 
 #: Turn rate of "look around", rad/s (a full turn takes 2π / this).
 LOOK_OMEGA = 0.6
+#: Seconds "Where are you?" waits for a reasoning that is due (the map changed since the
+#: last one: the snapshot's inferred types are those of before the change) before it answers.
+REASONING_WAIT = 2.0
 YES = frozenset({"yes", "y", "yeah", "yep", "yes there was", "there was", "correct", "right"})
 NO = frozenset({"no", "n", "nope", "no there was not", "there was not", "there wasn't", "wrong"})
 _ARTICLE = re.compile(r"^(the|a|an|this|that)\s+", re.IGNORECASE)
@@ -437,8 +441,30 @@ class DialogueAgent:
         return result
 
     async def _on_ask_place(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:
-        area = self.area_view(self.current_area())
+        snap = await self._reasoned_snapshot()
+        area = self.area_view(self.current_area(), snap)
         return [self.say(intent, "ask_place", "ok", {"area": area})]
+
+    async def _reasoned_snapshot(self) -> dict[str, Any]:
+        """The concepts snapshot, after the reasoning that is due if one is (at most
+        :data:`REASONING_WAIT` seconds): right after the area changed (a node joined it), the
+        cached snapshot has the area without its inferred types until the reasoner has run,
+        and "Where are you?" said "the room with the couch and the television" where it had
+        just said "the living room"."""
+        snap = self._snapshot()
+        flush = getattr(self.concepts, "flush", None)
+        due = isinstance(snap.get("reasoned"), int) and snap["reasoned"] < int(snap.get("version") or 0)
+        if due and flush is not None:
+            try:  # shielded: a late answer must not cancel the reasoning itself
+                fresh = await asyncio.wait_for(asyncio.shield(flush()), REASONING_WAIT)
+            except Exception:  # TimeoutError, or the reasoning failed (the service logs why)
+                log.warning(
+                    "the reasoner did not finish within %.1f s; answering from the cache", REASONING_WAIT
+                )
+            else:
+                if isinstance(fresh, dict):
+                    snap = fresh
+        return snap
 
     async def _on_ask_where(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:
         target = dict(args["target"])

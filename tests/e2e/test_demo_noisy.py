@@ -20,7 +20,7 @@ import pytest
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 
-SEED = 1  # the exact-odometry tour test plays seed 0
+SEED = 2  # the exact-odometry tour test plays seed 0; docs/localization.md has every seed's runs
 
 
 @pytest.fixture(scope="module")

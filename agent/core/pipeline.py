@@ -423,6 +423,9 @@ class Pipeline:
         self.tracking_ms: deque[float] = deque(maxlen=1000)
         #: scans that waited for a tracker more than ``tracking_lag`` scans behind
         self.tracking_waits = 0
+        #: scans the tracker failed on (on its thread): the correction before stands
+        self.tracking_errors = 0
+        self.last_tracking_error: str | None = None
 
     @property
     def correction(self) -> np.ndarray | None:
@@ -453,7 +456,11 @@ class Pipeline:
             job = self._track_jobs.popleft()
             if not job.done():
                 self.tracking_waits += 1
-            self._correction = job.result().correction
+            try:
+                self._correction = job.result().correction
+            except Exception as exc:  # that scan's match is lost, not this scan
+                self.tracking_errors += 1
+                self.last_tracking_error = f"{type(exc).__name__}: {exc}"
         assert self.tracker is not None
         c = self._correction if self._lag or self.tracker.correction is None else self.tracker.correction
         return se2_compose(c, sensor)

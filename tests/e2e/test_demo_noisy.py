@@ -95,5 +95,5 @@ def test_the_tracked_pose_follows_the_truth_while_the_odometry_drifts(noisy_run:
     # the tracker's own time is reported apart from the per-scan path's
     final = next(d for d in reversed(diagnostics) if "tracking" in d.get("extra", d))
     tracking = final.get("extra", final)["tracking"]
-    assert tracking["lag"] == 3 and tracking["ms"]["p50"] > 0
+    assert tracking["lag"] == 3 and tracking["ms"]["p50"] > 0 and tracking["errors"] == 0
     assert math.isfinite(tracking["ms"]["p99"])

@@ -120,3 +120,38 @@ def _no_people():  # type: ignore[no-untyped-def]
     from agent.core.pipeline import PeopleParams
 
     return PeopleParams(enabled=False)
+
+
+def test_a_scan_the_tracker_fails_on_costs_only_its_own_match() -> None:
+    """On the tracker's thread an exception (here: one scan) is counted and the correction
+    before it stands; the scan that collects the result is processed like any other."""
+    g = world()
+    truth = path(0.1)[:40]
+    R = scans(g, truth)
+    odo = compose(truth[0], drifting_odometry(truth, drift=0.03, scale=1.04))
+    model = PlaceModel.load(default_model_path())
+    pipe = Pipeline(model, PipelineParams(localization=TrackingParams(), people=_no_people(), tracking_lag=2))
+    assert pipe.tracker is not None
+    real = pipe.tracker.update
+    calls = {"n": 0}
+
+    def flaky(*args, **kw):  # type: ignore[no-untyped-def]
+        calls["n"] += 1
+        if calls["n"] == 10:
+            raise ValueError("a bad scan")
+        return real(*args, **kw)
+
+    pipe.tracker.update = flaky  # type: ignore[method-assign]
+    results = []
+    try:
+        for i in range(len(truth)):
+            scan = LaserScan(
+                float(i), i, "laser", float(ANGLES[0]), float(ANGLES[1] - ANGLES[0]), RANGE_MAX, R[i]
+            )
+            results.append(pipe.process(scan, Pose2D(*odo[i], stamp=float(i))))
+    finally:
+        pipe.close()
+    assert len(results) == len(truth) and pipe.scans == len(truth)
+    assert pipe.tracking_errors == 1 and pipe.last_tracking_error == "ValueError: a bad scan"
+    # scan 11 collects scan 9's failed match: it keeps scan 8's correction
+    np.testing.assert_array_equal(results[11].correction, results[10].correction)

@@ -107,6 +107,20 @@ def register(subparsers: Any) -> None:
         help="draw the initial particles and recovery's random particles in proportion to Pr(z | y) "
         "over the free cells instead of uniformly (a semantic sensor resetting)",
     )
+    sem.add_argument(
+        "--semantic-history",
+        type=float,
+        default=0.0,
+        metavar="M",
+        help="with --semantic-proposal: recovery's particles also fit the labels of the last M metres "
+        "(default 0: the current label only; the evaluation's target row: 10)",
+    )
+    sem.add_argument(
+        "--semantic-recovery",
+        action="store_true",
+        help="recovery (augmented MCL) watches how well the particles' places explain the labels as "
+        "well as the scans",
+    )
     p.add_argument("--particles", type=int, default=10_000, help="particles (default 10000)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument(
@@ -194,6 +208,8 @@ def _localize(args: argparse.Namespace) -> int:
         semantic_observation=args.semantic_observation,
         semantic_distance=args.semantic_distance,
         semantic_proposal=args.semantic_proposal,
+        proposal_history=args.semantic_history,
+        semantic_recovery=args.semantic_recovery,
     )
     pf = ParticleFilter(field, prm, semantic=semantic, rng=np.random.default_rng(args.seed))
     mount = np.asarray(run.mount)

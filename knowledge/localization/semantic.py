@@ -10,6 +10,11 @@ on scans with a known true class (:func:`confusion_matrix`). A particle off the 
 cells (a wall, unknown space) gets ``1/K``, no information; the particle filter weights
 those separately by the map's occupancy (the ``Pr(x_t | m)`` term of eq. 6.3).
 
+:meth:`SemanticMap.class_likelihood` gives ``Pr(z_t | y)`` for every class at once, from the
+histogram's most probable class or from the whole histogram (:data:`OBSERVATIONS`); the
+particle filter weighs particles by it and, with its semantic proposal, draws new particles
+in proportion to it (:mod:`~knowledge.localization.mcl`).
+
 Arrays are in map orientation (row 0 at the bottom), as
 :class:`~knowledge.localization.likelihood.LikelihoodField`'s.
 """

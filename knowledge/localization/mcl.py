@@ -72,7 +72,7 @@ import numpy.typing as npt
 
 from knowledge.localization.likelihood import LikelihoodField
 from knowledge.localization.motion import MotionNoise, sample_motion
-from knowledge.localization.se2 import between, compose, wrap
+from knowledge.localization.se2 import between, wrap
 from knowledge.localization.semantic import OBSERVATIONS, SemanticMap
 
 __all__ = ["Estimate", "MclParams", "ParticleFilter", "beam_log_likelihood"]
@@ -217,6 +217,36 @@ def beam_log_likelihood(
                 tot += logp[row, col]
             else:
                 tot += outside
+        out[i] = tot
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def history_scores(
+    cand: np.ndarray, rel: np.ndarray, loglik: np.ndarray, labels: np.ndarray, res: float
+) -> np.ndarray:
+    """``(M,)`` ``Σ_j loglik[j, y(cand ⊕ rel[j])]`` for ``(M, 3)`` map-frame candidates,
+    ``(H, 3)`` relative poses and ``(H, K + 1)`` log-likelihoods per class (the last column:
+    cells without class or outside ``labels``, which holds -1 for no class)."""
+    rows, cols = labels.shape
+    k = loglik.shape[1] - 1
+    m = cand.shape[0]
+    out = np.zeros(m)
+    for i in range(m):
+        x, y, th = cand[i, 0], cand[i, 1], cand[i, 2]
+        c, s = math.cos(th), math.sin(th)
+        tot = 0.0
+        for j in range(rel.shape[0]):
+            px = x + c * rel[j, 0] - s * rel[j, 1]
+            py = y + s * rel[j, 0] + c * rel[j, 1]
+            col = math.floor(px / res)
+            row = math.floor(py / res)
+            cls = k
+            if 0 <= row < rows and 0 <= col < cols:
+                v = labels[row, col]
+                if v >= 0:
+                    cls = v
+            tot += loglik[j, cls]
         out[i] = tot
     return out
 
@@ -481,14 +511,9 @@ class ParticleFilter:
         past = [(o, lik) for at, o, lik in self._history if self._driven - at > 0.5 * _HISTORY_STEP]
         if not past:
             return cand[:n]
-        res = self.field.resolution
-        score = np.zeros(cand.shape[0])
-        for o, lik in past:
-            at = compose(cand, between(self._odom, o))
-            y = self.semantic.classes_at(
-                np.floor(at[:, 1] / res).astype(np.int64), np.floor(at[:, 0] / res).astype(np.int64)
-            )
-            score += np.log(lik)[y]
+        rel = np.array([between(self._odom, o) for o, _ in past])
+        loglik = np.log(np.array([lik for _, lik in past]))
+        score = history_scores(cand, rel, loglik, self.semantic.labels, self.field.resolution)
         p = np.exp(score - score.max())
         return cand[self.rng.choice(cand.shape[0], n, replace=False, p=p / p.sum())]
 

@@ -10,7 +10,7 @@ import pytest
 from support.localization_world import ANGLES, RANGE_MAX, drifting_odometry, labels, path, scans, world
 
 from knowledge.localization.likelihood import LikelihoodField
-from knowledge.localization.mcl import MclParams, ParticleFilter
+from knowledge.localization.mcl import MclParams, ParticleFilter, history_scores
 from knowledge.localization.semantic import SemanticMap
 
 CLASSES = ("room", "corridor")
@@ -189,3 +189,17 @@ def test_semantic_recovery_draws_new_particles_when_the_labels_stop_fitting(sett
         injected[recovery] = pf.injected
     assert injected[False] == 0  # the scans fit all along
     assert injected[True] > 100
+
+
+def test_history_scores_by_hand() -> None:
+    labels = np.array([[0, 0, 1, 1], [0, 0, 1, -1]], dtype=np.int8)  # 1 m cells, row 0 at y 0-1
+    loglik = np.log(np.array([[0.8, 0.2, 0.5], [0.3, 0.7, 0.5]]))  # two labels: room, then corridor
+    rel = np.array([[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])  # 1 m behind and 1 m ahead of the candidate
+    cand = np.array([[1.5, 0.5, 0.0], [2.5, 1.5, 0.0], [1.5, 0.5, math.pi], [3.5, 1.5, 0.0]])
+    got = history_scores(cand, rel, loglik, labels, 1.0)
+    # (1.5, 0.5) facing +x: behind (0.5, 0.5) room -> 0.8, ahead (2.5, 0.5) corridor -> 0.7
+    # (2.5, 1.5): behind (1.5, 1.5) room 0.8, ahead (3.5, 1.5) no class 0.5
+    # facing -x: behind (2.5, 0.5) corridor -> 0.2, ahead (0.5, 0.5) room -> 0.3
+    # (3.5, 1.5): behind (2.5, 1.5) corridor 0.2, ahead (4.5, 1.5) outside 0.5
+    want = np.log([0.8 * 0.7, 0.8 * 0.5, 0.2 * 0.3, 0.2 * 0.5])
+    assert np.allclose(got, want)

@@ -515,7 +515,8 @@ class ParticleFilter:
         loglik = np.log(np.array([lik for _, lik in past]))
         score = history_scores(cand, rel, loglik, self.semantic.labels, self.field.resolution)
         p = np.exp(score - score.max())
-        return cand[self.rng.choice(cand.shape[0], n, replace=False, p=p / p.sum())]
+        distinct = np.count_nonzero(p) >= n  # (scores far below the best underflow to 0)
+        return cand[self.rng.choice(cand.shape[0], n, replace=not distinct, p=p / p.sum())]
 
     def _apply(self, logw: np.ndarray, fit: np.ndarray | None) -> None:
         prm = self.params

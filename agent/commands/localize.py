@@ -23,6 +23,9 @@ from typing import Any
 
 from agent.commands.options import add_bus_options, emit_json
 
+#: knowledge.localization.semantic.OBSERVATIONS (spelled out: the CLI imports numpy only when it runs)
+OBSERVATIONS = ("argmax", "histogram")
+
 #: The confusion matrix used without ``--confusion``: the classifier right 70 % of the time,
 #: its errors spread evenly over the other classes.
 DEFAULT_HIT = 0.7
@@ -74,6 +77,49 @@ def register(subparsers: Any) -> None:
         nargs=3,
         metavar=("X", "Y", "THETA"),
         help="start tracking here (metres, metres, degrees: the robot in the map) instead of global localization",
+    )
+    sem = p.add_argument_group("the semantic term (with --labels)")
+    sem.add_argument(
+        "--semantic-weight",
+        type=float,
+        default=1.0,
+        metavar="W",
+        help="the factor on the semantic term's log-likelihood (default 1: eq. 6.3 as printed; 0: off)",
+    )
+    sem.add_argument(
+        "--semantic-observation",
+        choices=OBSERVATIONS,
+        default="argmax",
+        help="Pr(z | y) from the scan's most probable class (argmax, the book's) or from its whole "
+        "histogram (the mixture of the confusion matrix's columns)",
+    )
+    sem.add_argument(
+        "--semantic-distance",
+        type=float,
+        default=0.0,
+        metavar="M",
+        help="metres driven between two semantic weightings, earlier when the class changes (default 0: "
+        "every update)",
+    )
+    sem.add_argument(
+        "--semantic-proposal",
+        action="store_true",
+        help="draw the initial particles and recovery's random particles in proportion to Pr(z | y) "
+        "over the free cells instead of uniformly (a semantic sensor resetting)",
+    )
+    sem.add_argument(
+        "--semantic-history",
+        type=float,
+        default=0.0,
+        metavar="M",
+        help="with --semantic-proposal: recovery's particles also fit the labels of the last M metres "
+        "(default 0: the current label only; the evaluation's target row: 10)",
+    )
+    sem.add_argument(
+        "--semantic-recovery",
+        action="store_true",
+        help="recovery (augmented MCL) watches how well the particles' places explain the labels as "
+        "well as the scans",
     )
     p.add_argument("--particles", type=int, default=10_000, help="particles (default 10000)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
@@ -156,7 +202,15 @@ def _localize(args: argparse.Namespace) -> int:
     if args.labels is not None and codes is not None:
         legend = {**lbl.CLASS_NAMES, **lbl.read_legend(args.labels)}
         semantic = SemanticMap.from_codes(codes, legend, run.classes, _confusion(args.confusion, run.classes))
-    prm = MclParams(particles=args.particles)
+    prm = MclParams(
+        particles=args.particles,
+        semantic_weight=args.semantic_weight,
+        semantic_observation=args.semantic_observation,
+        semantic_distance=args.semantic_distance,
+        semantic_proposal=args.semantic_proposal,
+        proposal_history=args.semantic_history,
+        semantic_recovery=args.semantic_recovery,
+    )
     pf = ParticleFilter(field, prm, semantic=semantic, rng=np.random.default_rng(args.seed))
     mount = np.asarray(run.mount)
     if args.initial is not None:

@@ -10,6 +10,11 @@ on scans with a known true class (:func:`confusion_matrix`). A particle off the 
 cells (a wall, unknown space) gets ``1/K``, no information; the particle filter weights
 those separately by the map's occupancy (the ``Pr(x_t | m)`` term of eq. 6.3).
 
+:meth:`SemanticMap.class_likelihood` gives ``Pr(z_t | y)`` for every class at once, from the
+histogram's most probable class or from the whole histogram (:data:`OBSERVATIONS`); the
+particle filter weighs particles by it and, with its semantic proposal, draws new particles
+in proportion to it (:mod:`~knowledge.localization.mcl`).
+
 Arrays are in map orientation (row 0 at the bottom), as
 :class:`~knowledge.localization.likelihood.LikelihoodField`'s.
 """
@@ -22,7 +27,14 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["SemanticMap", "confusion_matrix"]
+__all__ = ["OBSERVATIONS", "SemanticMap", "confusion_matrix"]
+
+#: How the scan's class histogram ``h`` becomes the likelihood ``Pr(z_t | y)`` of each map
+#: class ``y``: ``"argmax"`` the confusion matrix's column of the histogram's most probable
+#: class (the book's eq. 6.3 with the classifier's label as ``z_t``); ``"histogram"`` the
+#: mixture ``Σ_k h_k·P(z = k | y)`` over the whole histogram (the label is uncertain: a scan
+#: the classifier finds 55 % room, 45 % corridor says little about either).
+OBSERVATIONS = ("argmax", "histogram")
 
 
 def confusion_matrix(
@@ -94,6 +106,33 @@ class SemanticMap:
             if name in index:
                 labels[img == code] = index[name]
         return cls(labels, tuple(classes), np.asarray(confusion, dtype=np.float64))
+
+    def class_likelihood(self, proba: npt.ArrayLike, observation: str = "argmax") -> np.ndarray:
+        """``(K + 1,)`` ``Pr(z_t | y)`` for each class ``y`` and, last, for a cell without class
+        (``1/K``: no information), from the scan's histogram ``proba`` over :attr:`classes`
+        (see :data:`OBSERVATIONS`)."""
+        k = len(self.classes)
+        h = np.asarray(proba, dtype=np.float64).reshape(-1)
+        if h.shape != (k,) or not np.all(np.isfinite(h)) or h.min() < 0 or h.sum() <= 0:
+            raise ValueError(f"proba must be {k} finite non-negative numbers, not all 0, got {h}")
+        if observation == "argmax":
+            col = self.confusion[:, int(np.argmax(h))]
+        elif observation == "histogram":
+            col = self.confusion @ (h / h.sum())
+        else:
+            raise ValueError(f"observation must be one of {OBSERVATIONS}, got {observation!r}")
+        return np.append(col, 1.0 / k)
+
+    def classes_at(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """``(N,)`` the class index of the cells ``(rows[i], cols[i])``, ``K`` for a cell without
+        class or outside the map (the index of :meth:`class_likelihood`'s last entry)."""
+        k = len(self.classes)
+        R, C = self.labels.shape
+        inside = (rows >= 0) & (rows < R) & (cols >= 0) & (cols < C)
+        y = np.full(np.shape(rows), k, dtype=np.int64)
+        lab = self.labels[rows[inside], cols[inside]].astype(np.int64)
+        y[inside] = np.where(lab < 0, k, lab)
+        return y
 
     def log_likelihood(self, rows: np.ndarray, cols: np.ndarray, observed: int) -> np.ndarray:
         """``(N,)`` ``log P(z = observed | y(cell))`` of the cells ``(rows[i], cols[i])``

@@ -66,6 +66,22 @@ def test_global_localization_with_labels_writes_validated_messages(recording: tu
     assert kinds["localization/pose"] == kinds["localization/scene"] == kinds["tf/map"] == s["updates"]
 
 
+def test_global_localization_with_the_semantic_proposal(recording: tuple) -> None:
+    rec, yaml, lab = recording
+    done = loci(
+        "localize", yaml, "--recording", rec, "--labels", lab, "--particles", "2000", "--semantic-proposal",
+        "--semantic-history", "10", "--semantic-recovery", "--semantic-weight", "0.3", "--json",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    s = json.loads(done.stdout)
+    assert s["semantic"] is True and s["truth"]["final_error"] < 0.3
+    assert s["truth"]["converged_at_scan"] is not None
+    bad = loci("localize", yaml, "--recording", rec, "--labels", lab, "--semantic-observation", "votes")
+    assert bad.returncode == 2 and "votes" in bad.stderr
+    bad = loci("localize", yaml, "--recording", rec, "--semantic-distance", "-1")
+    assert bad.returncode == 2 and "semantic_distance" in bad.stderr
+
+
 def test_tracking_from_an_initial_pose_and_bad_arguments(recording: tuple, tmp_path: Path) -> None:
     rec, yaml, _ = recording
     start = path(0.1)[0]

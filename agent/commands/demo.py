@@ -78,10 +78,10 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument(
         "--odometry",
-        choices=("noisy", "exact"),
-        default="noisy",
-        help="noisy (default): the base's odometry drifts (drivers.sim.base.OdometryNoise) and the agent "
-        "tracks its pose by scan matching; exact: the simulated odometry is the true pose, no tracking",
+        choices=("exact", "noisy"),
+        default="exact",
+        help="exact (default): the simulated odometry is the true pose; noisy: the base's odometry drifts "
+        "(drivers.sim.base.OdometryNoise) and the agent tracks its pose by scan matching on its own thread",
     )
     p.add_argument(
         "--json",

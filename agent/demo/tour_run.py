@@ -52,10 +52,10 @@ class DemoOptions:
     speed: float = 1.5
     interactive: bool = False
     replay: bool = True
-    #: "noisy" (the base's default odometry noise, drivers.sim.base.OdometryNoise, and the
-    #: agent tracks its pose by scan matching: [localization] tracking; docs/localization.md)
-    #: or "exact" (the simulator's odometry is the true pose)
-    odometry: str = "noisy"
+    #: "exact" (the simulator's odometry is the true pose) or "noisy" (the base's default
+    #: odometry noise, drivers.sim.base.OdometryNoise, and the agent tracks its pose by scan
+    #: matching: [localization] tracking; docs/localization.md)
+    odometry: str = "exact"
     timeouts: TourTimeouts = field(default_factory=TourTimeouts)
     startup_timeout: float = 120.0
     #: ``[HOST:]PORT`` of the agent's Foxglove live view (None: none)

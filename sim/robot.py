@@ -15,7 +15,9 @@ One world — a generated office (``gen:SEED``, ``tour:SEED``) or a map file —
   the building's furniture as pictures;
 * what the base does: follow a scripted route (given waypoints, or a tour of the building's
   rooms through their doors, :mod:`sim.route`), a velocity command, or a goal (a
-  pose or a path, in the odometry or the map frame; planned around walls unless told not).
+  pose or a path, in the odometry or the map frame; planned around walls unless told not;
+  a planned goal given while the base stands against an obstacle backs off to clear space
+  first, as a real base's local planner would, instead of stopping at once).
 
 Every step the listeners get a :class:`RobotSample` (odometry in frame ``"odom"``, the true
 pose in frame ``"map"``, the place class at the true pose); goal and motion events are
@@ -81,6 +83,8 @@ MAX_ROUTE_COLLISIONS = 20
 GOAL_SLACK_S = 30.0
 #: Metres a planned goal's waypoint may be moved to keep clear of obstacles.
 SNAP_DISTANCE = 0.5
+#: Metres of clearance beyond the base's radius within which it counts as touching an obstacle.
+TOUCHING = 0.03
 #: Furniture kinds shown to the camera, as catalogue kinds of :mod:`sim.objects`.
 _PICTURE_KIND = {
     "couch": "couch",
@@ -671,6 +675,12 @@ class SimRobot:
             pts = np.column_stack((truth.x + c * d[:, 0] - s * d[:, 1], truth.y + s * d[:, 0] + c * d[:, 1]))
             heading = None if heading is None else heading + dth
         here = np.array([[truth.x, truth.y]])
+        if goal.plan and float(self.world.clearance(here[0])) < self.base.radius + TOUCHING:
+            # stopped against an obstacle (a follower cutting a corner behind its person): back
+            # off to the nearest clear point first, or every new goal would stop at once
+            q = np.asarray(self.planner.nearest_clear(here[0]))
+            if math.dist(q, here[0]) <= SNAP_DISTANCE:
+                pts = np.vstack([q, pts])
         if goal.plan:
             # waypoints hugging an obstacle (a follower aiming beside a narrow gap, a doorway
             # node seen through drifted odometry): the nearest points the planner keeps clear

@@ -168,6 +168,21 @@ def test_a_goal_in_the_odometry_frame_is_reached_where_the_odometry_puts_it(buil
     assert [r.status for r in reports if r.goal == "g1"] == ["active", "reached"]
 
 
+def test_a_goal_given_while_touching_an_obstacle_backs_off_first() -> None:
+    # the noisy tour, seed 2: following its tutor round the mop bucket, the robot stopped
+    # against the bucket's corner; each new follow goal (beyond the bucket) collided at once,
+    # and the robot stood there for the rest of the walk
+    start = (8.50, 5.53, 0.41)
+    robot, reports = _robot(world="demo:2", start=start, odom_noise=OdometryNoise(0, 0, 0))
+    here = np.array(start[:2])
+    assert float(robot.world.clearance(here)) < robot.base.radius + 0.01  # touching
+    robot.send_goal(Goal("past-the-bucket", ((9.07, 5.26),), frame_id="map"))
+    assert _run_until(robot, reports, "past-the-bucket", limit=30.0).status == "reached"
+    assert robot.base.collisions == 0
+    t = robot.base.true_pose
+    assert math.dist((t.x, t.y), (9.07, 5.26)) < 0.5  # the goal hugs the bucket: moved to clear space
+
+
 def test_unreachable_goals_fail_and_velocity_commands_time_out(building: Building) -> None:
     robot, reports = _robot(start=corridor_start(building), cmd_timeout=0.5)
     robot.send_goal(Goal("wall", ((-100.0, -100.0),), frame_id="map"))

@@ -405,6 +405,9 @@ class LocalizationConfig:
         lag: scans; the tracker runs on its own thread and scan ``k`` is corrected with what
             it found for scan ``k − lag`` (0: in the per-scan path, adding its 4–9 ms to every
             scan; docs/localization.md "In the agent").
+        smoothing: seconds; the correction each scan is given follows the tracker's with
+            this time constant (changes of more than 0.2 m or 0.1 rad at once; 0: the
+            tracker's as it is).
     """
 
     tracking: bool = False
@@ -412,12 +415,15 @@ class LocalizationConfig:
     beam_step: int = 2
     accept_fit: float = 0.3
     lag: int = 3
+    smoothing: float = 0.25
 
     def __post_init__(self) -> None:
         if isinstance(self.lag, bool) or not isinstance(self.lag, int) or not 0 <= self.lag <= 100:
             raise ValueError(
                 f"localization.lag must be a whole number of scans in [0, 100], got {self.lag!r}"
             )
+        if not (math.isfinite(self.smoothing) and 0.0 <= self.smoothing <= 10.0):
+            raise ValueError(f"localization.smoothing must be seconds in [0, 10], got {self.smoothing!r}")
 
     def tracking_params(self) -> Any:
         """The tracker's parameters, or None when tracking is off."""

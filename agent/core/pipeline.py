@@ -76,6 +76,7 @@ from drivers.messages import LaserScan, Pose2D
 from knowledge.learning.hmm import HMMFilter
 from knowledge.localization.scan_matching import MatchParams
 from knowledge.localization.se2 import compose as se2_compose
+from knowledge.localization.se2 import inverse as se2_inverse
 from knowledge.localization.tracking import PoseTracker, TrackingParams, TrackStep
 from knowledge.metric.local_map import LocalMap, LocalMapParams, beam_endpoints
 from knowledge.metric.rear_beams import FullScanParams, assemble_scan
@@ -102,9 +103,13 @@ __all__ = [
     "areas_message",
     "graph_message",
     "place_message",
+    "smooth_correction",
 ]
 
 TWO_PI = 2.0 * math.pi
+#: Metres, radians: a change of the tracker's correction larger than this is taken at once,
+#: not smoothed (``tracking_smoothing``): odometry that stalled and jumped, a recovery.
+SMOOTHING_JUMP = (0.2, 0.1)
 #: What the doorway detector of a 360° laser (which sees the current scan) gets where legs
 #: were detected: ``"raw"`` (the legs as obstacles; the default: the leg detector takes door
 #: jambs passed at arm's length for legs, and hiding them hid the door in 5 of 8 tour runs),
@@ -192,6 +197,9 @@ class PipelineParams:
         tracking_lag: scans; 0: the tracker runs in :meth:`Pipeline.process`; ``L > 0``: on
             its own thread, scan ``k`` corrected with scan ``k − L``'s result (see the module
             docstring).
+        tracking_smoothing: seconds; the correction a scan is given follows the tracker's
+            with this time constant, small changes only (0: the tracker's as it is; see
+            :meth:`Pipeline.correction`).
         places: the HMM filter of the place labels and which label votes.
     """
 
@@ -204,6 +212,7 @@ class PipelineParams:
     localization: TrackingParams | None = None
     places: PlaceFilterParams = field(default_factory=PlaceFilterParams)
     tracking_lag: int = 0
+    tracking_smoothing: float = 0.0
 
     def __post_init__(self) -> None:
         if (
@@ -213,6 +222,10 @@ class PipelineParams:
         ):
             raise ValueError(
                 f"tracking_lag must be a whole number of scans in [0, 100], got {self.tracking_lag!r}"
+            )
+        if not (math.isfinite(self.tracking_smoothing) and 0.0 <= self.tracking_smoothing <= 10.0):
+            raise ValueError(
+                f"tracking_smoothing must be seconds in [0, 10], got {self.tracking_smoothing!r}"
             )
         m = tuple(float(v) for v in self.mount)
         if len(m) != 3 or not all(math.isfinite(v) for v in m):
@@ -231,6 +244,7 @@ class PipelineParams:
             localization=config.localization.tracking_params(),
             places=PlaceFilterParams(hmm=config.places.hmm, vote=config.places.vote),
             tracking_lag=config.localization.lag if config.localization.tracking else 0,
+            tracking_smoothing=config.localization.smoothing if config.localization.tracking else 0.0,
         )
 
     def to_table(self) -> dict[str, Any]:
@@ -240,6 +254,8 @@ class PipelineParams:
             extra["localization"] = dataclass_table(self.localization)
             if self.tracking_lag:  # absent: the tracker ran in the per-scan path (older recordings)
                 extra["tracking_lag"] = self.tracking_lag
+            if self.tracking_smoothing:  # absent: not smoothed (older recordings)
+                extra["tracking_smoothing"] = self.tracking_smoothing
         return extra | {
             "mount": list(self.mount),
             "local_map": dataclass_table(self.local_map),
@@ -263,6 +279,7 @@ class PipelineParams:
         known = {
             *("mount", "local_map", "rear_beams", "graph", "doorways", "people", "localization", "places"),
             "tracking_lag",
+            "tracking_smoothing",
         }
         unknown = sorted(set(table) - known)
         if unknown:
@@ -280,6 +297,7 @@ class PipelineParams:
             localization=_tracking_from(table["localization"]) if table.get("localization") else None,
             places=build_dataclass(PlaceFilterParams, table.get("places", {"hmm": False}), "places"),
             tracking_lag=_lag_from(table.get("tracking_lag", 0)),
+            tracking_smoothing=_smoothing_from(table.get("tracking_smoothing", 0.0)),
         )
 
 
@@ -418,7 +436,9 @@ class Pipeline:
         self._lag = self.params.tracking_lag if self.tracker is not None else 0
         self._track_pool: ThreadPoolExecutor | None = None
         self._track_jobs: deque[Future[TrackStep]] = deque()
-        self._correction = np.zeros(3)  # map -> odom applied; the tracker starts at identity
+        self._correction = np.zeros(3)  # map -> odom the tracker found (scan k - L's); starts at identity
+        self._applied = np.zeros(3)  # map -> odom the latest scan was given (smoothed)
+        self._applied_stamp: float | None = None
         #: milliseconds the tracker took per scan (the newest 1000), wherever it ran
         self.tracking_ms: deque[float] = deque(maxlen=1000)
         #: scans that waited for a tracker more than ``tracking_lag`` scans behind
@@ -430,8 +450,30 @@ class Pipeline:
     @property
     def correction(self) -> np.ndarray | None:
         """``(3,)`` the map → odom transform the latest scan was corrected with (None:
-        tracking off). With a ``tracking_lag`` this is scan ``k − L``'s, not the tracker's newest."""
-        return None if self.tracker is None else self._correction.copy()
+        tracking off). With a ``tracking_lag`` this is scan ``k − L``'s, not the tracker's newest.
+
+        With ``tracking_smoothing`` τ it follows the tracker's correction smoothly: each scan
+        moves the corrected pose the fraction ``1 − exp(−Δt/τ)`` of the way from where the
+        previous correction puts it to where the tracker's puts it, unless the two lie more
+        than :data:`SMOOTHING_JUMP` apart (odometry that jumped: taken at once). Each match
+        has its own noise (the scan's stamp jitters by milliseconds, and turning at 2 rad/s
+        that is a degree of heading): applied as it comes, scan after scan, it shakes the local
+        map, whose points a beam at a grazing angle then "sees through" and clears (the
+        furniture's sides beside the tour's false doorway vanished so, and with them the
+        doorway). The odometry's drift the correction is there for is slow.
+        """
+        return None if self.tracker is None else self._applied.copy()
+
+    def _smoothed(self, raw: np.ndarray, sensor: np.ndarray, stamp: float) -> np.ndarray:
+        """The correction scan ``sensor`` (odometry pose) at ``stamp`` is given, from the
+        tracker's ``raw`` one (see :attr:`correction`)."""
+        tau = self.params.tracking_smoothing
+        applied = raw
+        if tau > 0.0 and self._applied_stamp is not None:
+            applied = smooth_correction(self._applied, raw, sensor, stamp - self._applied_stamp, tau)
+        self._applied = np.array(applied, dtype=np.float64)
+        self._applied_stamp = stamp
+        return self._applied
 
     def close(self) -> None:
         """Stop the tracker's thread (if it runs on one); pending scans are dropped."""
@@ -449,7 +491,7 @@ class Pipeline:
         self.tracking_ms.append((time.perf_counter() - t0) * 1e3)
         return step
 
-    def _pose_before_tracking(self, sensor: np.ndarray) -> np.ndarray:
+    def _pose_before_tracking(self, sensor: np.ndarray, stamp: float) -> np.ndarray:
         """The laser's map pose known before this scan is matched: with a lag, the final one
         (scan ``k − L``'s correction, collected here); inline, the tracker's prediction."""
         if self._lag and len(self._track_jobs) >= self._lag:
@@ -462,7 +504,9 @@ class Pipeline:
                 self.tracking_errors += 1
                 self.last_tracking_error = f"{type(exc).__name__}: {exc}"
         assert self.tracker is not None
-        c = self._correction if self._lag or self.tracker.correction is None else self.tracker.correction
+        if self._lag:
+            return se2_compose(self._smoothed(self._correction, sensor, stamp), sensor)
+        c = self._applied if self.tracker.correction is None else self.tracker.correction
         return se2_compose(c, sensor)
 
     def _track(
@@ -474,11 +518,14 @@ class Pipeline:
         if self._lag == 0:
             step = self._timed_track(ranges, angles, sensor, scan)
             self._correction = step.correction
-            return step.pose, step.correction
+            applied = self._smoothed(step.correction, sensor, scan.stamp)
+            if self.params.tracking_smoothing == 0.0:
+                return step.pose, step.correction
+            return se2_compose(applied, sensor), applied.copy()
         if self._track_pool is None:
             self._track_pool = ThreadPoolExecutor(1, thread_name_prefix="loci-tracking")
         self._track_jobs.append(self._track_pool.submit(self._timed_track, ranges, angles, sensor, scan))
-        return pose, self._correction.copy()
+        return pose, self._applied.copy()
 
     # ------------------------------------------------------------------ per scan
     def _beam_angles(self, scan: LaserScan) -> np.ndarray:
@@ -504,7 +551,7 @@ class Pipeline:
         frame_id = pose.frame_id
         odom_sensor = sensor
         if self.tracker is not None:
-            sensor = self._pose_before_tracking(odom_sensor)
+            sensor = self._pose_before_tracking(odom_sensor, scan.stamp)
             frame_id = "map"
         fsp = self.params.rear_beams
         full = is_full_turn(scan)
@@ -687,6 +734,38 @@ class Pipeline:
             ranges = np.minimum(4.0 / np.maximum(np.abs(np.cos(a)), 0.2), 10.0).astype(np.float32)
             scan = LaserScan(float(i), i, "laser", angle_min, inc, 30.0, ranges)
             p.process(scan, Pose2D(0.1 * i, 0.0, 0.0, stamp=float(i)))
+
+
+def smooth_correction(
+    applied: np.ndarray, raw: np.ndarray, sensor: np.ndarray, dt: float, tau: float
+) -> np.ndarray:
+    """One step of :attr:`Pipeline.correction`'s smoothing: the map → odom correction for
+    the odometry pose ``sensor``, ``dt`` seconds after ``applied`` was given, towards the
+    tracker's ``raw``, with time constant ``tau`` seconds.
+
+    What moves smoothly is the corrected *pose* (``applied ⊕ sensor`` towards ``raw ⊕
+    sensor``), not the transform's numbers: far from the odometry's origin a hundredth of a
+    radian of the transform is decimetres of its translation. A pose change of more than
+    :data:`SMOOTHING_JUMP` is taken at once.
+    """
+    before = se2_compose(applied, sensor)
+    target = se2_compose(raw, sensor)
+    d = target - before
+    d[2] = math.atan2(math.sin(d[2]), math.cos(d[2]))
+    if tau <= 0.0 or math.hypot(d[0], d[1]) > SMOOTHING_JUMP[0] or abs(d[2]) > SMOOTHING_JUMP[1]:
+        return np.asarray(raw, dtype=np.float64).copy()
+    a = 1.0 - math.exp(-max(dt, 0.0) / tau)
+    return np.asarray(se2_compose(before + a * d, se2_inverse(sensor)), dtype=np.float64)
+
+
+def _smoothing_from(value: Any) -> float:
+    from knowledge.errors import ConfigError
+
+    if isinstance(value, bool) or not isinstance(value, int | float) or not 0.0 <= value <= 10.0:
+        raise ConfigError(
+            f"pipeline parameters: tracking_smoothing must be seconds in [0, 10], got {value!r}"
+        )
+    return float(value)
 
 
 def _lag_from(value: Any) -> int:

@@ -10,10 +10,10 @@ import pytest
 from support.localization_world import ANGLES, RANGE_MAX, drifting_odometry, path, scans, world
 
 from agent.config import load_config
-from agent.core.pipeline import Pipeline, PipelineParams, graph_message
+from agent.core.pipeline import Pipeline, PipelineParams, graph_message, smooth_correction
 from drivers.messages import LaserScan, Pose2D
 from knowledge.errors import ConfigError
-from knowledge.localization.se2 import compose
+from knowledge.localization.se2 import compose, inverse
 from knowledge.localization.tracking import TrackingParams
 from knowledge.localization.trajectory import ate
 from knowledge.places.model import PlaceModel, default_model_path
@@ -155,3 +155,80 @@ def test_a_scan_the_tracker_fails_on_costs_only_its_own_match() -> None:
     assert pipe.tracking_errors == 1 and pipe.last_tracking_error == "ValueError: a bad scan"
     # scan 11 collects scan 9's failed match: it keeps scan 8's correction
     np.testing.assert_array_equal(results[11].correction, results[10].correction)
+
+
+def _run(
+    params: PipelineParams, truth: np.ndarray, R: np.ndarray, odo: np.ndarray, rate: float
+) -> np.ndarray:
+    pipe = Pipeline(PlaceModel.load(default_model_path()), params)
+    out = []
+    try:
+        for i in range(len(truth)):
+            scan = LaserScan(
+                i / rate, i, "laser", float(ANGLES[0]), float(ANGLES[1] - ANGLES[0]), RANGE_MAX, R[i]
+            )
+            r = pipe.process(scan, Pose2D(*odo[i], stamp=i / rate))
+            out.append((r.pose.x, r.pose.y, r.pose.theta))
+    finally:
+        pipe.close()
+    return np.array(out)
+
+
+def test_smoothing_keeps_each_match_s_noise_out_of_the_next_scans() -> None:
+    """Scan k gets scan k − 3's correction: that match's own error (here the odometry's
+    heading at each scan off by a few milliseconds of a turn, as a jittered stamp makes it)
+    comes on top of scan k's. Smoothed over 0.25 s it averages out."""
+    g = world()
+    truth = path(0.1)
+    R = scans(g, truth)
+    rng = np.random.default_rng(3)
+    odo = compose(truth[0], drifting_odometry(truth, drift=0.03, scale=1.04))
+    odo[:, 2] += rng.normal(0.0, 0.02, len(odo))  # per-scan heading error, not accumulating
+    raw = _run(
+        PipelineParams(localization=TrackingParams(), people=_no_people(), tracking_lag=3),
+        truth,
+        R,
+        odo,
+        37.5,
+    )
+    smooth = _run(
+        PipelineParams(
+            localization=TrackingParams(), people=_no_people(), tracking_lag=3, tracking_smoothing=0.25
+        ),
+        truth,
+        R,
+        odo,
+        37.5,
+    )
+    # heading errors against the truth
+    err = {k: np.angle(np.exp(1j * (p[:, 2] - truth[:, 2]))) for k, p in (("raw", raw), ("smooth", smooth))}
+    sd = {k: float(np.std(e[10:])) for k, e in err.items()}
+    assert sd["smooth"] < 0.8 * sd["raw"], sd
+    assert sd["smooth"] < 1.3 * 0.02  # about the odometry's own, where the raw is about √2 times it
+    # recordings carry the setting; older ones had none
+    p = PipelineParams(localization=TrackingParams(), tracking_lag=3, tracking_smoothing=0.25)
+    assert PipelineParams.from_table(p.to_table()) == p
+    old = p.to_table()
+    del old["tracking_smoothing"]
+    assert PipelineParams.from_table(old).tracking_smoothing == 0.0
+    with pytest.raises(ConfigError, match="smoothing"):
+        load_config(table={"localization": {"tracking": True, "smoothing": -1}}, env={})
+
+
+def test_smoothing_moves_the_pose_part_of_the_way_and_takes_jumps_at_once() -> None:
+    far = np.array([40.0, -25.0, 2.0])  # an odometry pose far from the odometry's origin
+    applied = np.array([1.0, 2.0, 0.1])
+    tau, dt = 0.25, 1 / 37.5
+    a = 1 - math.exp(-dt / tau)
+    # a small change (5 cm, 0.02 rad of the pose): the pose moves the fraction a of the way
+    target_pose = compose(applied, far) + np.array([0.03, -0.04, 0.02])
+    raw = compose(target_pose, inverse(far))
+    got = compose(smooth_correction(applied, raw, far, dt, tau), far)
+    before = compose(applied, far)
+    np.testing.assert_allclose(got, before + a * (target_pose - before), atol=1e-9)
+    # nothing smoothed with tau 0, a jump taken at once, and time never runs backwards
+    np.testing.assert_array_equal(smooth_correction(applied, raw, far, dt, 0.0), raw)
+    for step in ([0.3, 0.0, 0.0], [0.0, 0.0, 0.15]):
+        jumped = compose(compose(applied, far) + np.array(step), inverse(far))
+        np.testing.assert_allclose(smooth_correction(applied, jumped, far, dt, tau), jumped)
+    np.testing.assert_allclose(smooth_correction(applied, raw, far, -1.0, tau), applied, atol=1e-12)

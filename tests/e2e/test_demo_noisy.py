@@ -79,6 +79,7 @@ def test_the_tracked_pose_follows_the_truth_while_the_odometry_drifts(noisy_run:
     truth, place, diagnostics, meta = _recording(out / "tour.mcap")
     params = json.loads(next(m["pipeline"] for m in meta.values() if "pipeline" in m))
     assert params["tracking_lag"] == 3 and params["localization"]["beam_step"] >= 1
+    assert params["tracking_smoothing"] == 0.25  # the correction follows the tracker's smoothly
     mx, my, _ = params["mount"]
     idx = np.minimum(np.searchsorted(truth[:, 0], place[:, 0]), len(truth) - 1)
     t = truth[idx]

@@ -113,12 +113,27 @@ class MatchParams:
 
 
 class MatchField:
-    """A likelihood field with the score arrays the matcher needs (made once per field)."""
+    """A likelihood field with the score arrays the matcher needs (made once per field).
 
-    def __init__(self, field: LikelihoodField, sigmas: tuple[float, ...]) -> None:
+    Args:
+        field: the field.
+        sigmas: metres, one score array each.
+        scores: the ``(rows, cols)`` float32 arrays ``field.score(σ)`` already made (kept up to
+            date by their owner, :class:`~knowledge.localization.tracking_field.TrackingField`);
+            None: made here.
+    """
+
+    def __init__(
+        self, field: LikelihoodField, sigmas: tuple[float, ...], scores: list[np.ndarray] | None = None
+    ) -> None:
         self.field = field
         self.sigmas = tuple(sigmas)
-        self.scores = [field.score(s) for s in self.sigmas]
+        if scores is None:
+            self.scores = [field.score(s) for s in self.sigmas]
+        else:
+            if len(scores) != len(self.sigmas) or any(a.shape != field.shape for a in scores):
+                raise ValueError("scores must be one array of the field's shape per sigma")
+            self.scores = list(scores)
 
     @property
     def resolution(self) -> float:

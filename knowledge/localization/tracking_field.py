@@ -116,6 +116,22 @@ def _apply(
         free[r, c] = state == 1
 
 
+def _placed(
+    old: np.ndarray, shape: tuple[int, int], a: int, b: int, fill: np.ndarray | float | bool
+) -> np.ndarray:
+    """A new array of ``shape`` (in its last two axes) holding ``old`` at row ``a``, column
+    ``b`` and ``fill`` around it (each cell written once: a grown field is a burst of memory
+    traffic)."""
+    rows, cols = old.shape[-2:]
+    new = np.empty((*old.shape[:-2], *shape), dtype=old.dtype)
+    new[..., :a, :] = fill
+    new[..., a + rows :, :] = fill
+    new[..., a : a + rows, :b] = fill
+    new[..., a : a + rows, b + cols :] = fill
+    new[..., a : a + rows, b : b + cols] = old
+    return new
+
+
 class TrackingField:
     """A likelihood field of a growing map and its score arrays, updated where the map changed.
 
@@ -202,19 +218,12 @@ class TrackingField:
             rmin, rmax, cmin, cmax = rmin - g, rmax + g, cmin - g, cmax + g
         r0, c0 = (rmin // t) * t, (cmin // t) * t
         nr, nc = (rmax // t + 1) * t - r0, (cmax // t + 1) * t - c0
-        occ = np.zeros((nr, nc), dtype=bool)
-        free = np.zeros((nr, nc), dtype=bool)
-        dist = np.full((nr, nc), self._far[0, 0], dtype=np.float32)
-        scores = np.empty((len(self.sigmas), nr, nc), dtype=np.float32)
-        scores[:] = self._far_scores
-        dirty = np.zeros((nr // t, nc // t), dtype=bool)
-        if rows:
-            a, b = self.row0 - r0, self.col0 - c0
-            occ[a : a + rows, b : b + cols] = self.occupied
-            free[a : a + rows, b : b + cols] = self.free
-            dist[a : a + rows, b : b + cols] = self.distance
-            scores[:, a : a + rows, b : b + cols] = self.scores
-            dirty[a // t : (a + rows) // t, b // t : (b + cols) // t] = self._dirty
+        a, b = (self.row0 - r0, self.col0 - c0) if rows else (0, 0)
+        occ = _placed(self.occupied, (nr, nc), a, b, False)
+        free = _placed(self.free, (nr, nc), a, b, False)
+        dist = _placed(self.distance, (nr, nc), a, b, self._far[0, 0])
+        scores = _placed(self.scores, (nr, nc), a, b, self._far_scores)
+        dirty = _placed(self._dirty, (nr // t, nc // t), a // t, b // t, False)
         self.row0, self.col0 = r0, c0
         self.occupied, self.free, self.distance, self.scores, self._dirty = occ, free, dist, scores, dirty
         self._mf = None

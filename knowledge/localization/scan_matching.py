@@ -225,8 +225,10 @@ def _correlate(
     best = -1.0
     bi, bj, bk = 0, 0, 0
     m = pts.shape[0]
+    side = 2 * n_lin + 1
     ci = np.empty(m, dtype=np.int64)
     cj = np.empty(m, dtype=np.int64)
+    tot = np.empty((side, side))
     for k in range(angles.shape[0]):
         a = th + angles[k]
         c, s = math.cos(a), math.sin(a)
@@ -235,18 +237,25 @@ def _correlate(
             px, py = pts[p, 0], pts[p, 1]
             cj[p] = math.floor((x + c * px - s * py) / res)
             ci[p] = math.floor((y + s * px + c * py) / res)
+        # endpoint by endpoint, the block of cells its offsets reach, row by row (each cell
+        # read once, in memory order); every offset's sum still adds the endpoints in order
+        tot[:, :] = 0.0
+        for p in range(m):
+            for di in range(-n_lin, n_lin + 1):
+                r = ci[p] + di
+                if r < 0 or r >= rows:
+                    continue
+                for dj in range(-n_lin, n_lin + 1):
+                    q = cj[p] + dj
+                    if 0 <= q < cols:
+                        tot[di + n_lin, dj + n_lin] += score[r, q]
         for di in range(-n_lin, n_lin + 1):
             for dj in range(-n_lin, n_lin + 1):
-                tot = 0.0
-                for p in range(m):
-                    r = ci[p] + di
-                    q = cj[p] + dj
-                    if 0 <= r < rows and 0 <= q < cols:
-                        tot += score[r, q]
+                t = tot[di + n_lin, dj + n_lin]
                 if w_t > 0.0 or w_r > 0.0:
-                    tot *= math.exp(-w_t * (di * di + dj * dj) * res * res - turn)
-                if tot > best:
-                    best = tot
+                    t *= math.exp(-w_t * (di * di + dj * dj) * res * res - turn)
+                if t > best:
+                    best = t
                     bi, bj, bk = di, dj, k
     return bj, bi, bk, best
 

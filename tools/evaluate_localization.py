@@ -779,7 +779,7 @@ def render(report: dict[str, Any]) -> list[str]:
             a = r["ate"]
             ms = None if r["ms_per_scan"] is None else round(r["ms_per_scan"], 1)
             lines.append(
-                f"| {r['name']} | {a['rmse']:.3f} m | {a['mean']:.3f} / {a['max']:.3f} m | "
+                f"| {r['name'].strip()} | {a['rmse']:.3f} m | {a['mean']:.3f} / {a['max']:.3f} m | "
                 f"{r['rpe_5m']['rmse']:.3f} m | {fmt(ms)} |"
             )
         lines.append("")

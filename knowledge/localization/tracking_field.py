@@ -116,18 +116,23 @@ def _apply(
         free[r, c] = state == 1
 
 
+def _fill_around(arr: np.ndarray, a: int, b: int, rows: int, cols: int, fill: np.ndarray | float) -> None:
+    """Set every cell of ``arr`` (in its last two axes) outside rows ``a..a+rows`` and
+    columns ``b..b+cols`` to ``fill``."""
+    arr[..., :a, :] = fill
+    arr[..., a + rows :, :] = fill
+    arr[..., a : a + rows, :b] = fill
+    arr[..., a : a + rows, b + cols :] = fill
+
+
 def _placed(
     old: np.ndarray, shape: tuple[int, int], a: int, b: int, fill: np.ndarray | float | bool
 ) -> np.ndarray:
     """A new array of ``shape`` (in its last two axes) holding ``old`` at row ``a``, column
-    ``b`` and ``fill`` around it (each cell written once: a grown field is a burst of memory
-    traffic)."""
+    ``b`` and ``fill`` around it."""
     rows, cols = old.shape[-2:]
     new = np.empty((*old.shape[:-2], *shape), dtype=old.dtype)
-    new[..., :a, :] = fill
-    new[..., a + rows :, :] = fill
-    new[..., a : a + rows, :b] = fill
-    new[..., a : a + rows, b + cols :] = fill
+    _fill_around(new, a, b, rows, cols, fill)
     new[..., a : a + rows, b : b + cols] = old
     return new
 
@@ -141,7 +146,12 @@ class TrackingField:
         max_distance: metres, where distances are clipped.
         sigmas: metres, the matcher's ``σ`` (one score array each).
         tile: cells per tile side.
-        grow: metres the arrays grow by beyond a change that falls outside them.
+        grow: metres the field grows by beyond a change that falls outside it.
+        reserve: metres of room kept around the field in its memory, each side (at least
+            half the field's size: the memory doubles): the field grows into it by filling in
+            only the new cells, and memory that was never filled in is never touched (the
+            arrays are zeroed by the system as their pages are first used). Only a field
+            that outgrows its room is copied into a larger one.
     """
 
     def __init__(
@@ -153,6 +163,7 @@ class TrackingField:
         *,
         tile: int = 64,
         grow: float = 8.0,
+        reserve: float = 40.0,
     ) -> None:
         if not (
             math.isfinite(resolution) and resolution > 0 and math.isfinite(max_distance) and max_distance > 0
@@ -160,8 +171,10 @@ class TrackingField:
             raise ValueError(
                 f"resolution and max_distance must be positive metres, got {resolution}, {max_distance}"
             )
-        if tile < 1 or not grow >= 0:
-            raise ValueError(f"tile must be >= 1 cell and grow >= 0 m, got {tile}, {grow}")
+        if tile < 1 or not grow >= 0 or not reserve >= 0:
+            raise ValueError(
+                f"tile must be >= 1 cell, grow and reserve >= 0 m, got {tile}, {grow}, {reserve}"
+            )
         self.lattice_origin = (float(lattice_origin[0]), float(lattice_origin[1]))
         self.resolution = float(resolution)
         self.max_distance = float(max_distance)
@@ -170,6 +183,7 @@ class TrackingField:
         # the cells a change reaches: the clipped distance of a cell further away stays the same
         self.reach = math.ceil(self.max_distance / self.resolution) + 1
         self._grow = math.ceil(grow / self.resolution)
+        self._reserve = math.ceil(reserve / self.resolution / self.tile) * self.tile
         self._k = np.array([-0.5 / (s * s) for s in self.sigmas])
         # the distance and scores of a cell with no obstacle within reach
         self._far = np.empty((1, 1), dtype=np.float32)
@@ -183,6 +197,11 @@ class TrackingField:
             self._far,
             self._far_scores,
         )
+        # the memory the field lives in: lattice rows/cols from (_brow0, _bcol0)
+        self._brow0 = self._bcol0 = 0
+        self._bufs: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        #: how many times the field outgrew its memory and was copied
+        self.reallocations = 0
         self.row0 = self.col0 = 0
         self.occupied = np.zeros((0, 0), dtype=bool)
         self.free = np.zeros((0, 0), dtype=bool)
@@ -219,10 +238,30 @@ class TrackingField:
         r0, c0 = (rmin // t) * t, (cmin // t) * t
         nr, nc = (rmax // t + 1) * t - r0, (cmax // t + 1) * t - c0
         a, b = (self.row0 - r0, self.col0 - c0) if rows else (0, 0)
-        occ = _placed(self.occupied, (nr, nc), a, b, False)
-        free = _placed(self.free, (nr, nc), a, b, False)
-        dist = _placed(self.distance, (nr, nc), a, b, self._far[0, 0])
-        scores = _placed(self.scores, (nr, nc), a, b, self._far_scores)
+        bufs = self._bufs
+        br, bc = r0 - self._brow0, c0 - self._bcol0
+        if bufs is None or br < 0 or bc < 0 or br + nr > bufs[0].shape[0] or bc + nc > bufs[0].shape[1]:
+            # room around the field, at least half its size each side; np.zeros leaves the
+            # pages to the system, which zeroes them when first touched
+            pr, pc = max(self._reserve, nr // (2 * t) * t), max(self._reserve, nc // (2 * t) * t)
+            shape = (nr + 2 * pr, nc + 2 * pc)
+            new = (
+                np.zeros(shape, dtype=bool),
+                np.zeros(shape, dtype=bool),
+                np.zeros(shape, dtype=np.float32),
+                np.zeros((len(self.sigmas), *shape), dtype=np.float32),
+            )
+            if rows:
+                for buf, old in zip(new, (self.occupied, self.free, self.distance, self.scores), strict=True):
+                    buf[..., pr + a : pr + a + rows, pc + b : pc + b + cols] = old
+                self.reallocations += 1
+            bufs, self._bufs = new, new
+            self._brow0, self._bcol0 = r0 - pr, c0 - pc
+            br, bc = pr, pc
+        occ, free, dist, scores = (buf[..., br : br + nr, bc : bc + nc] for buf in bufs)
+        # the new cells, never touched: unknown (zero already), far from everything
+        _fill_around(dist, a, b, rows, cols, self._far[0, 0])
+        _fill_around(scores, a, b, rows, cols, self._far_scores)
         dirty = _placed(self._dirty, (nr // t, nc // t), a // t, b // t, False)
         self.row0, self.col0 = r0, c0
         self.occupied, self.free, self.distance, self.scores, self._dirty = occ, free, dist, scores, dirty

@@ -103,6 +103,9 @@ def _integrate(
             hits[r1, c1] += 1
 
 
+#: metres of room kept around the grid in memory, each side (at least half the grid's size)
+_ROOM = 40.0
+
 #: cell states in :meth:`ScanMapper.take_changes`
 CELL_UNKNOWN, CELL_FREE, CELL_OCCUPIED = 0, 1, 2
 
@@ -186,6 +189,9 @@ class ScanMapper:
         self.params = params or MappingParams()
         self._hits = np.zeros((0, 0), dtype=np.int32)
         self._misses = np.zeros((0, 0), dtype=np.int32)
+        # the memory the counts are views of, and where the grid's cell (0, 0) is in it
+        self._room: tuple[np.ndarray, np.ndarray] | None = None
+        self._room_at = (0, 0)
         self._origin = (0.0, 0.0)  # world (x, y) of cell (row 0, col 0)'s lower-left corner
         # the lattice: cell (row, col) of the grid is lattice cell (row - r, col - c) for
         # (r, c) = _anchor; lattice cell (0, 0) is the first grid's cell (0, 0)
@@ -217,12 +223,29 @@ class ScanMapper:
             y1 = max(oy + rows * res, ymax + prm.margin if ymax >= oy + rows * res else 0.0)
         new_cols = math.ceil((x1 - new_ox) / res)
         new_rows = math.ceil((y1 - new_oy) / res)
-        hits = np.zeros((new_rows, new_cols), dtype=np.int32)
-        misses = np.zeros((new_rows, new_cols), dtype=np.int32)
-        if rows:
-            hits[shift_r : shift_r + rows, shift_c : shift_c + cols] = self._hits
-            misses[shift_r : shift_r + rows, shift_c : shift_c + cols] = self._misses
-        self._hits, self._misses = hits, misses
+        # the counts live in larger zeroed memory, with room on each side: the grid grows in
+        # place (the new cells are zero, their pages untouched until used); only a grid that
+        # outgrows its room is copied, into room at least half its size each side
+        br, bc = self._room_at[0] - shift_r, self._room_at[1] - shift_c
+        room = self._room
+        if (
+            room is None
+            or br < 0
+            or bc < 0
+            or br + new_rows > room[0].shape[0]
+            or bc + new_cols > room[0].shape[1]
+        ):
+            pr = max(math.ceil(_ROOM / res), new_rows // 2)
+            pc = max(math.ceil(_ROOM / res), new_cols // 2)
+            shape = (new_rows + 2 * pr, new_cols + 2 * pc)
+            room = (np.zeros(shape, dtype=np.int32), np.zeros(shape, dtype=np.int32))
+            if rows:
+                room[0][pr + shift_r : pr + shift_r + rows, pc + shift_c : pc + shift_c + cols] = self._hits
+                room[1][pr + shift_r : pr + shift_r + rows, pc + shift_c : pc + shift_c + cols] = self._misses
+            self._room, br, bc = room, pr, pc
+        self._room_at = (br, bc)
+        self._hits = room[0][br : br + new_rows, bc : bc + new_cols]
+        self._misses = room[1][br : br + new_rows, bc : bc + new_cols]
         self._origin = (new_ox, new_oy)
         self._anchor = (self._anchor[0] + shift_r, self._anchor[1] + shift_c)
 

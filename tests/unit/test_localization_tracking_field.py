@@ -108,8 +108,29 @@ def test_the_mapper_lists_every_change_in_lattice_cells_that_stay_put() -> None:
         ScanMapper().take_changes()
 
 
-@pytest.mark.parametrize("every", [1, 5])
-def test_the_incremental_field_is_the_field_made_from_scratch(every: int) -> None:
+def test_the_mapper_grows_in_place_as_it_would_by_copying() -> None:
+    g, truth = world(), path()
+    R = scans(g, truth)
+    in_place = ScanMapper(MappingParams(margin=0.2, max_range=3.0), changes=True)
+    copied = ScanMapper(MappingParams(margin=0.2, max_range=3.0), changes=True)
+    shapes, first_room = set(), None
+    for i in list(range(len(truth) - 1, -1, -5)) + list(range(0, len(truth), 9)):
+        copied._room = None  # no room kept: every growth copies the counts into new memory
+        for m in (in_place, copied):
+            m.add(R[i], ANGLES, truth[i], range_max=RANGE_MAX)
+        first_room = first_room or in_place._room
+        shapes.add(in_place._hits.shape)
+        assert np.array_equal(in_place._hits, copied._hits) and np.array_equal(
+            in_place._misses, copied._misses
+        )
+        assert np.array_equal(in_place.take_changes(), copied.take_changes())
+    # it grew many times, to the left and to the right, in the memory it was given first
+    assert len(shapes) > 10 and in_place._room is first_room and in_place._origin == copied._origin
+    assert np.array_equal(in_place.grid().state, copied.grid().state)
+
+
+@pytest.mark.parametrize(("every", "reserve"), [(1, 0.0), (5, 0.0), (1, 30.0)])
+def test_the_incremental_field_is_the_field_made_from_scratch(every: int, reserve: float) -> None:
     g, truth = world(), path()
     R = scans(g, truth)
     mapper = ScanMapper(MappingParams(margin=0.2, max_range=3.0), changes=True)
@@ -123,7 +144,7 @@ def test_the_incremental_field_is_the_field_made_from_scratch(every: int) -> Non
             origin = mapper.lattice_origin
             assert origin is not None
             # small tiles and growth steps: many tiles, runs and growths in a small world
-            field = TrackingField(origin, 0.05, 1.0, SIGMAS, tile=16, grow=0.5)
+            field = TrackingField(origin, 0.05, 1.0, SIGMAS, tile=16, grow=0.5, reserve=reserve)
         field.update(mapper.take_changes())
         rows, cols = field.shape
         occ, free = _lattice_box(mapper, field.row0, field.col0, rows, cols)
@@ -139,6 +160,9 @@ def test_the_incremental_field_is_the_field_made_from_scratch(every: int) -> Non
         assert mf.field.origin == pytest.approx((x0 + field.col0 * 0.05, y0 + field.row0 * 0.05, 0.0))
         checked += 1
     assert field is not None and checked > 10
+    # with no more room than its own size the field was copied into larger memory; with
+    # 30 m of room it grew in place
+    assert (field.reallocations > 0) if reserve == 0.0 else (field.reallocations == 0), field.reallocations
     assert field.update(np.zeros((0, 3), dtype=np.int64)) == 0  # nothing changed: nothing redone
 
 

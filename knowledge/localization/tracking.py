@@ -14,11 +14,12 @@ takes the matched pose and updates ``C``. Two kinds of map:
   it is when the robot has moved ``refresh_distance`` from where it was then or
   ``refresh_scans`` scans were integrated since. The field covers the whole map and is kept
   up to date tile by tile where the scans changed the map
-  (:class:`~knowledge.localization.tracking_field.TrackingField`: a few milliseconds per
-  update on the CSAIL log instead of 24–33 ms to remake a 44 m window, ``field = "window"``,
-  which older recordings replay with). Errors still accumulate (there is no loop closure), but only where a
-  scan sees nothing it saw before: back in known places the scans match the map made
-  there, which bounds the drift (docs/localization.md has how far on real logs).
+  (:class:`~knowledge.localization.tracking_field.TrackingField`: about 4 ms of CPU per
+  update on the CSAIL log, instead of 26–29 ms to remake the field of a 44 m window around
+  the robot, ``field = "window"``, which older recordings replay with). Errors still
+  accumulate (there is no loop closure), but only where a scan sees nothing it saw before:
+  back in known places the scans match the map made there, which bounds the drift
+  (docs/localization.md has how far on real logs).
 * **known** (``prior``): one likelihood field of the whole map; nothing is integrated.
 
 Odometry that stalls and then jumps (the raw CSAIL log has such jumps, up to 1.5 rad between

@@ -197,3 +197,13 @@ def test_the_tracker_tracks_as_well_with_the_incremental_field() -> None:
     assert errs["incremental"] < 0.05 and errs["window"] < 0.05
     with pytest.raises(ValueError, match="field"):
         TrackingParams(field="tiles")
+
+
+def test_a_first_scan_with_no_echo_leaves_the_field_for_later() -> None:
+    g, truth = world(), path()
+    R, odo = scans(g, truth), drifting_odometry(truth)
+    tracker = PoseTracker()
+    first = tracker.update(np.full(ANGLES.shape, np.inf), ANGLES, odo[0], range_max=RANGE_MAX)
+    assert tracker.mapper.scans == 1 and tracker.mapper.lattice_origin is None and not first.matched
+    steps = [tracker.update(R[i], ANGLES, odo[i], range_max=RANGE_MAX) for i in range(1, 40)]
+    assert tracker.tracking_field is not None and sum(s.matched for s in steps) > 20

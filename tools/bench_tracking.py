@@ -133,8 +133,11 @@ def run(data: Path, scans: int = 1000, rate: float = 37.5, lag: int = 3) -> dict
     ]
     same = bool(diffs) and max(diffs) == 0.0
     thread = rows[2]
+    from knowledge.localization.tracking import TrackingParams
+
     return {
         "log": str(LOG),
+        "field": TrackingParams().field,
         "scans": len(pairs),
         "rate_hz": rate,
         "load": round(os.getloadavg()[0], 2),
@@ -152,7 +155,8 @@ def run(data: Path, scans: int = 1000, rate: float = 37.5, lag: int = 3) -> dict
 def report(res: dict[str, Any]) -> str:
     lines = [
         f"The raw CSAIL log's first {res['scans']} scans through the pipeline (bundled place model, "
-        f"people on) at {res['rate_hz']} scans/s, one process (load {res['load']} at the end):",
+        f"people on) at {res['rate_hz']} scans/s, one process (load {res['load']} at the end); the tracker's "
+        f"likelihood field: {res.get('field', 'window')}:",
         "",
         "| tracking | process p50 ms | p99 ms | max ms | p99 / off | tracker ms p50 | tracker ms p99 | scans that waited |",
         "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",

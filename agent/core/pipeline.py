@@ -783,6 +783,8 @@ def _tracking_from(table: Mapping[str, Any]) -> TrackingParams:
     # a table without the odometry prior was written before it: none, so the replay matches
     t.setdefault("prior_translation", 0.0)
     t.setdefault("prior_rotation", 0.0)
+    # ... and one without the field's kind before the incremental field: the window, remade
+    t.setdefault("field", "window")
     match = build_dataclass(MatchParams, t.pop("match", {}), "localization.match")
     return replace(build_dataclass(TrackingParams, t, "localization", skip=("match",)), match=match)
 

@@ -10,6 +10,8 @@
   refinement of one scan against a likelihood field.
 * :mod:`~knowledge.localization.tracking` — pose tracking: odometry corrected by matching
   each scan against the map built so far (or a known map); the ``map → odom`` correction.
+* :mod:`~knowledge.localization.tracking_field` — the likelihood field of the map the
+  tracker builds as it goes, kept up to date tile by tile where the scans changed it.
 * :mod:`~knowledge.localization.motion`, :mod:`~knowledge.localization.mcl`,
   :mod:`~knowledge.localization.semantic` — Monte Carlo localization with the place
   classifier as an extra observation (book Sect. 6.3, eq. 6.3).

@@ -113,12 +113,27 @@ class MatchParams:
 
 
 class MatchField:
-    """A likelihood field with the score arrays the matcher needs (made once per field)."""
+    """A likelihood field with the score arrays the matcher needs (made once per field).
 
-    def __init__(self, field: LikelihoodField, sigmas: tuple[float, ...]) -> None:
+    Args:
+        field: the field.
+        sigmas: metres, one score array each.
+        scores: the ``(rows, cols)`` float32 arrays ``field.score(σ)`` already made (kept up to
+            date by their owner, :class:`~knowledge.localization.tracking_field.TrackingField`);
+            None: made here.
+    """
+
+    def __init__(
+        self, field: LikelihoodField, sigmas: tuple[float, ...], scores: list[np.ndarray] | None = None
+    ) -> None:
         self.field = field
         self.sigmas = tuple(sigmas)
-        self.scores = [field.score(s) for s in self.sigmas]
+        if scores is None:
+            self.scores = [field.score(s) for s in self.sigmas]
+        else:
+            if len(scores) != len(self.sigmas) or any(a.shape != field.shape for a in scores):
+                raise ValueError("scores must be one array of the field's shape per sigma")
+            self.scores = list(scores)
 
     @property
     def resolution(self) -> float:
@@ -210,8 +225,10 @@ def _correlate(
     best = -1.0
     bi, bj, bk = 0, 0, 0
     m = pts.shape[0]
+    side = 2 * n_lin + 1
     ci = np.empty(m, dtype=np.int64)
     cj = np.empty(m, dtype=np.int64)
+    tot = np.empty((side, side))
     for k in range(angles.shape[0]):
         a = th + angles[k]
         c, s = math.cos(a), math.sin(a)
@@ -220,18 +237,25 @@ def _correlate(
             px, py = pts[p, 0], pts[p, 1]
             cj[p] = math.floor((x + c * px - s * py) / res)
             ci[p] = math.floor((y + s * px + c * py) / res)
+        # endpoint by endpoint, the block of cells its offsets reach, row by row (each cell
+        # read once, in memory order); every offset's sum still adds the endpoints in order
+        tot[:, :] = 0.0
+        for p in range(m):
+            for di in range(-n_lin, n_lin + 1):
+                r = ci[p] + di
+                if r < 0 or r >= rows:
+                    continue
+                for dj in range(-n_lin, n_lin + 1):
+                    q = cj[p] + dj
+                    if 0 <= q < cols:
+                        tot[di + n_lin, dj + n_lin] += score[r, q]
         for di in range(-n_lin, n_lin + 1):
             for dj in range(-n_lin, n_lin + 1):
-                tot = 0.0
-                for p in range(m):
-                    r = ci[p] + di
-                    q = cj[p] + dj
-                    if 0 <= r < rows and 0 <= q < cols:
-                        tot += score[r, q]
+                t = tot[di + n_lin, dj + n_lin]
                 if w_t > 0.0 or w_r > 0.0:
-                    tot *= math.exp(-w_t * (di * di + dj * dj) * res * res - turn)
-                if tot > best:
-                    best = tot
+                    t *= math.exp(-w_t * (di * di + dj * dj) * res * res - turn)
+                if t > best:
+                    best = t
                     bi, bj, bk = di, dj, k
     return bj, bi, bk, best
 

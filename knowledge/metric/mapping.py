@@ -14,6 +14,11 @@ occupancy is lower, unknown where no beam reached; in the frame of the poses. Fo
 and for a map built from a log with SLAM-corrected poses (the localization issue's ground
 truth map).
 
+With ``changes=True`` the mapper also lists the cells whose state (unknown, free, occupied)
+an integrated scan changed (:meth:`ScanMapper.take_changes`), in *lattice* indices that stay
+put when the grid grows: what a pose tracker needs to keep a likelihood field of the whole
+map up to date without remaking it (:class:`~knowledge.localization.tracking_field.TrackingField`).
+
 Poses are the laser's ``(x, y, theta)`` in metres and radians; beam ``i`` points at
 ``angles[i]`` radians from the laser's heading.
 """
@@ -28,7 +33,7 @@ import numpy as np
 
 from knowledge.metric.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 
-__all__ = ["MappingParams", "ScanMapper"]
+__all__ = ["CELL_FREE", "CELL_OCCUPIED", "CELL_UNKNOWN", "MappingParams", "ScanMapper"]
 
 
 @dataclass(frozen=True)
@@ -98,14 +103,102 @@ def _integrate(
             hits[r1, c1] += 1
 
 
-class ScanMapper:
-    """Integrates scans at known poses into a growing grid of counts (see the module docstring)."""
+#: metres of room kept around the grid in memory, each side (at least half the grid's size)
+_ROOM = 40.0
 
-    def __init__(self, params: MappingParams | None = None) -> None:
+#: cell states in :meth:`ScanMapper.take_changes`
+CELL_UNKNOWN, CELL_FREE, CELL_OCCUPIED = 0, 1, 2
+
+
+@numba.njit(cache=True, nogil=True)
+def _state(h: int, m: int, occupied: float) -> int:
+    if h + m == 0:
+        return 0
+    if h > 0 and h >= occupied * (h + m):
+        return 2
+    return 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _integrate_changes(
+    hits: np.ndarray,
+    misses: np.ndarray,
+    x0: float,
+    y0: float,
+    ex: np.ndarray,
+    ey: np.ndarray,
+    res: float,
+    ox: float,
+    oy: float,
+    occupied: float,
+    out: np.ndarray,
+) -> int:
+    """:func:`_integrate`, and every count that changes a cell's state (unknown 0, free 1,
+    occupied 2: :meth:`ScanMapper.window`'s rule) appends ``(row, col, new state)`` to
+    ``out``, in order; returns how many rows it wrote (``out`` must have room for one per
+    cell visited)."""
+    rows, cols = hits.shape
+    n = 0
+    c0 = math.floor((x0 - ox) / res)
+    r0 = math.floor((y0 - oy) / res)
+    for i in range(ex.shape[0]):
+        c1 = math.floor((ex[i] - ox) / res)
+        r1 = math.floor((ey[i] - oy) / res)
+        dc = abs(c1 - c0)
+        dr = abs(r1 - r0)
+        sc = 1 if c1 > c0 else -1
+        sr = 1 if r1 > r0 else -1
+        err = dc - dr
+        c, r = c0, r0
+        while c != c1 or r != r1:  # Bresenham's walk, as in _integrate
+            if 0 <= r < rows and 0 <= c < cols:
+                h, m = hits[r, c], misses[r, c]
+                before = _state(h, m, occupied)
+                misses[r, c] = m + 1
+                after = _state(h, m + 1, occupied)
+                if after != before:
+                    out[n, 0], out[n, 1], out[n, 2] = r, c, after
+                    n += 1
+            e2 = 2 * err
+            if e2 > -dr:
+                err -= dr
+                c += sc
+            if e2 < dc:
+                err += dc
+                r += sr
+        if 0 <= r1 < rows and 0 <= c1 < cols:
+            h, m = hits[r1, c1], misses[r1, c1]
+            before = _state(h, m, occupied)
+            hits[r1, c1] = h + 1
+            after = _state(h + 1, m, occupied)
+            if after != before:
+                out[n, 0], out[n, 1], out[n, 2] = r1, c1, after
+                n += 1
+    return n
+
+
+class ScanMapper:
+    """Integrates scans at known poses into a growing grid of counts (see the module docstring).
+
+    Args:
+        params: the parameters.
+        changes: list the cells each scan changes (:meth:`take_changes`).
+    """
+
+    def __init__(self, params: MappingParams | None = None, *, changes: bool = False) -> None:
         self.params = params or MappingParams()
         self._hits = np.zeros((0, 0), dtype=np.int32)
         self._misses = np.zeros((0, 0), dtype=np.int32)
+        # the memory the counts are views of, and where the grid's cell (0, 0) is in it
+        self._room: tuple[np.ndarray, np.ndarray] | None = None
+        self._room_at = (0, 0)
         self._origin = (0.0, 0.0)  # world (x, y) of cell (row 0, col 0)'s lower-left corner
+        # the lattice: cell (row, col) of the grid is lattice cell (row - r, col - c) for
+        # (r, c) = _anchor; lattice cell (0, 0) is the first grid's cell (0, 0)
+        self._anchor = (0, 0)
+        self._lattice_origin: tuple[float, float] | None = None
+        self._track_changes = bool(changes)
+        self._changes: list[np.ndarray] = []
         self.scans = 0
 
     def _cover(self, xmin: float, ymin: float, xmax: float, ymax: float) -> None:
@@ -120,6 +213,7 @@ class ScanMapper:
             new_ox, new_oy = xmin - prm.margin, ymin - prm.margin
             shift_c = shift_r = 0
             x1, y1 = xmax + prm.margin, ymax + prm.margin
+            self._lattice_origin = (new_ox, new_oy)
         else:
             # the new origin lies a whole number of cells from the old one: the lattice stays
             shift_c = max(0, math.ceil((ox - (xmin - prm.margin)) / res)) if xmin < ox else 0
@@ -129,13 +223,31 @@ class ScanMapper:
             y1 = max(oy + rows * res, ymax + prm.margin if ymax >= oy + rows * res else 0.0)
         new_cols = math.ceil((x1 - new_ox) / res)
         new_rows = math.ceil((y1 - new_oy) / res)
-        hits = np.zeros((new_rows, new_cols), dtype=np.int32)
-        misses = np.zeros((new_rows, new_cols), dtype=np.int32)
-        if rows:
-            hits[shift_r : shift_r + rows, shift_c : shift_c + cols] = self._hits
-            misses[shift_r : shift_r + rows, shift_c : shift_c + cols] = self._misses
-        self._hits, self._misses = hits, misses
+        # the counts live in larger zeroed memory, with room on each side: the grid grows in
+        # place (the new cells are zero, their pages untouched until used); only a grid that
+        # outgrows its room is copied, into room at least half its size each side
+        br, bc = self._room_at[0] - shift_r, self._room_at[1] - shift_c
+        room = self._room
+        if (
+            room is None
+            or br < 0
+            or bc < 0
+            or br + new_rows > room[0].shape[0]
+            or bc + new_cols > room[0].shape[1]
+        ):
+            pr = max(math.ceil(_ROOM / res), new_rows // 2)
+            pc = max(math.ceil(_ROOM / res), new_cols // 2)
+            shape = (new_rows + 2 * pr, new_cols + 2 * pc)
+            room = (np.zeros(shape, dtype=np.int32), np.zeros(shape, dtype=np.int32))
+            if rows:
+                room[0][pr + shift_r : pr + shift_r + rows, pc + shift_c : pc + shift_c + cols] = self._hits
+                room[1][pr + shift_r : pr + shift_r + rows, pc + shift_c : pc + shift_c + cols] = self._misses
+            self._room, br, bc = room, pr, pc
+        self._room_at = (br, bc)
+        self._hits = room[0][br : br + new_rows, bc : bc + new_cols]
+        self._misses = room[1][br : br + new_rows, bc : bc + new_cols]
         self._origin = (new_ox, new_oy)
+        self._anchor = (self._anchor[0] + shift_r, self._anchor[1] + shift_c)
 
     def add(
         self,
@@ -169,12 +281,46 @@ class ScanMapper:
             min(x, float(ex.min())), min(y, float(ey.min())), max(x, float(ex.max())), max(y, float(ey.max()))
         )
         ox, oy = self._origin
-        _integrate(self._hits, self._misses, x, y, ex, ey, self.params.resolution, ox, oy)
+        res = self.params.resolution
+        if not self._track_changes:
+            _integrate(self._hits, self._misses, x, y, ex, ey, res, ox, oy)
+            return
+        # room for one change per cell visited: a beam visits at most |dc| + |dr| + 1 cells,
+        # |dc| <= |Δx| / res + 1 (likewise |dr|)
+        cap = int(np.sum(np.abs(ex - x) + np.abs(ey - y)) / res) + 3 * int(ex.size) + 1
+        out = np.empty((cap, 3), dtype=np.int64)
+        n = _integrate_changes(self._hits, self._misses, x, y, ex, ey, res, ox, oy, prm.occupied, out)
+        if n:
+            ch = out[:n].copy()
+            ch[:, 0] -= self._anchor[0]
+            ch[:, 1] -= self._anchor[1]
+            self._changes.append(ch)
+
+    @property
+    def lattice_origin(self) -> tuple[float, float] | None:
+        """World ``(x, y)`` of the lower-left corner of lattice cell ``(0, 0)`` (None before
+        the first beam): lattice cell ``(row, col)`` spans ``x`` from ``x0 + col·resolution``,
+        ``y`` from ``y0 + row·resolution``, however the grid grew."""
+        return self._lattice_origin
+
+    def take_changes(self) -> np.ndarray:
+        """``(K, 3)`` int64 ``(lattice row, lattice col, state)`` of every change of a cell's
+        state (:data:`CELL_UNKNOWN`, :data:`CELL_FREE`, :data:`CELL_OCCUPIED`, as
+        :meth:`window` tells them) since the last call, in the order they happened (a cell
+        may appear more than once: its last row holds its state now). Needs ``changes=True``."""
+        if not self._track_changes:
+            raise ValueError("this ScanMapper does not list its changes: make it with changes=True")
+        if not self._changes:
+            return np.zeros((0, 3), dtype=np.int64)
+        out = np.concatenate(self._changes) if len(self._changes) > 1 else self._changes[0]
+        self._changes = []
+        return out
 
     def copy(self) -> ScanMapper:
         """An independent copy of the counts so far (to build a grid elsewhere)."""
         other = ScanMapper(self.params)
         other._hits, other._misses, other._origin = self._hits.copy(), self._misses.copy(), self._origin
+        other._anchor, other._lattice_origin = self._anchor, self._lattice_origin
         other.scans = self.scans
         return other
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from support.localization_world import ANGLES, RANGE_MAX, drifting_odometry, path, scans, world
@@ -175,3 +177,46 @@ def test_the_tracker_weighs_its_prior_by_the_odometry_increment() -> None:
     assert fast[1] == pytest.approx(0.02 / 0.31) and fast[1] < still[1]
     with pytest.raises(ValueError, match="prior_translation"):
         TrackingParams(prior_translation=-1.0)
+
+
+def _correlate_reference(score, pts, x, y, th, res, n_lin, angles, w_t, w_r):  # type: ignore[no-untyped-def]
+    """The correlative search as written first: offset by offset, the endpoints summed in order."""
+    rows, cols = score.shape
+    best, found = -1.0, (0, 0, 0)
+    for k, da in enumerate(angles):
+        c, s = math.cos(th + da), math.sin(th + da)
+        cj = [math.floor((x + c * px - s * py) / res) for px, py in pts]
+        ci = [math.floor((y + s * px + c * py) / res) for px, py in pts]
+        for di in range(-n_lin, n_lin + 1):
+            for dj in range(-n_lin, n_lin + 1):
+                tot = 0.0
+                for r0, q0 in zip(ci, cj, strict=True):
+                    r, q = r0 + di, q0 + dj
+                    if 0 <= r < rows and 0 <= q < cols:
+                        tot += float(score[r, q])
+                if w_t > 0.0 or w_r > 0.0:
+                    tot *= math.exp(-w_t * (di * di + dj * dj) * res * res - w_r * da * da)
+                if tot > best:
+                    best, found = tot, (dj, di, k)
+    return (*found, best)
+
+
+@pytest.mark.parametrize("weights", [(0.0, 0.0), (15.0, 2.0)])
+def test_the_correlative_search_kernel_is_the_plain_loop(setting: tuple, weights: tuple) -> None:
+    from knowledge.localization.scan_matching import _correlate
+
+    g, truth, R, _ = setting
+    lf = LikelihoodField.from_grid(g, 1.0)
+    score = lf.score(0.05)
+    pts = scan_points(R[60], ANGLES, range_max=RANGE_MAX, step=4)
+    angles = np.arange(-6, 7) * 0.02
+    # from the true pose and from off it; near the grid's edge some offsets fall outside
+    for off in ((0.0, 0.0, 0.0), (0.2, -0.15, 0.1)):
+        x, y, th = lf.to_map(truth[60] + np.array(off))
+        got = _correlate(score, pts, x, y, th, 0.05, 5, angles, *weights)
+        assert tuple(got) == _correlate_reference(score, pts, x, y, th, 0.05, 5, angles, *weights)
+    edge = np.zeros_like(score)
+    edge[:3, :] = 1.0
+    edge[:, -2:] = 0.5
+    got = _correlate(edge, pts, 0.1, 0.1, 0.3, 0.05, 4, angles, *weights)
+    assert tuple(got) == _correlate_reference(edge, pts, 0.1, 0.1, 0.3, 0.05, 4, angles, *weights)

@@ -39,6 +39,11 @@ def test_the_configuration_turns_tracking_on_and_recordings_keep_it() -> None:
     assert PipelineParams.from_table(old).localization == TrackingParams(
         beam_step=3, prior_translation=0.0, prior_rotation=0.0
     )
+    # one made before the incremental field replays with the window remade as it ran
+    assert params.localization is not None and params.localization.field == "incremental"
+    old = params.to_table()
+    del old["localization"]["field"]
+    assert PipelineParams.from_table(old).localization == TrackingParams(beam_step=3, field="window")
     with pytest.raises(ConfigError, match="tracking_lag"):
         PipelineParams.from_table({**params.to_table(), "tracking_lag": -1})
     with pytest.raises(ConfigError, match="lag"):

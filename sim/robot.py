@@ -678,9 +678,9 @@ class SimRobot:
         if goal.plan and float(self.world.clearance(here[0])) < self.base.radius + TOUCHING:
             # stopped against an obstacle (a follower cutting a corner behind its person): back
             # off to the nearest clear point first, or every new goal would stop at once
-            q = np.asarray(self.planner.nearest_clear(here[0]))
-            if math.dist(q, here[0]) <= SNAP_DISTANCE:
-                pts = np.vstack([q, pts])
+            clear = np.asarray(self.planner.nearest_clear(here[0]))
+            if math.dist(clear, here[0]) <= SNAP_DISTANCE:
+                pts = np.vstack([clear, pts])
         if goal.plan:
             # waypoints hugging an obstacle (a follower aiming beside a narrow gap, a doorway
             # node seen through drifted odometry): the nearest points the planner keeps clear

@@ -388,7 +388,27 @@ class RoutePlanner:
         corners = [pts[0]]
         for i0, i1 in itertools.pairwise(anchors):
             corners.extend(self._straighten(pts[i0 : i1 + 1])[1:])
+        corners = self._no_turning_back(corners)
+        corners = self._no_turning_back(corners[::-1])[::-1]
         return Route(np.asarray(corners), doors=tuple(doors), spacing=self.params.spacing)
+
+    def _no_turning_back(self, corners: list[np.ndarray]) -> list[np.ndarray]:
+        """Drop the first waypoints the route would turn back from: a start already in a
+        doorway, past the point the crossing approaches it from, went back to that point
+        first (and a robot re-planning every few tenths of a second, as a follower does, turned
+        round in the door for ever). A waypoint goes when the route turns back after it (by
+        more than 120°) and the start sees the next one in the clear."""
+        pts = list(corners)
+        while len(pts) >= 3:
+            a, b, c = (np.asarray(q, dtype=np.float64) for q in pts[:3])
+            need = min(self.params.clearance, float(self.clearance(a))) - self.grid.resolution
+            u, v = b - a, c - b
+            back = float(u @ v) < -0.5 * float(np.hypot(*u) * np.hypot(*v))  # turns by over 120°
+            if back and self.segment_clearance(a, c) >= max(need, 0.0):
+                del pts[1]
+            else:
+                break
+        return pts
 
     def _door_crossings(
         self, raw: np.ndarray, fixed_pts: set[tuple[float, float]]

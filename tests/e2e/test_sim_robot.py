@@ -168,6 +168,27 @@ def test_a_goal_in_the_odometry_frame_is_reached_where_the_odometry_puts_it(buil
     assert [r.status for r in reports if r.goal == "g1"] == ["active", "reached"]
 
 
+def test_a_route_from_inside_a_doorway_does_not_turn_back_to_its_approach() -> None:
+    # the noisy tour, seed 4: the robot following its tutor stood in the living room's door
+    # (past the point the crossing approaches it from); each new follow goal's route went
+    # back to that point first, so the robot turned round in the door for the whole walk
+    from sim.tour import tour_world
+
+    tour = tour_world(4)
+    planner = RoutePlanner.for_building(tour.building)
+    door = tour.doorway.center
+    for start, goal in (((9.77, 2.26), (9.35, 3.03)), ((9.74, 2.46), (8.92, 3.49))):
+        route = planner.plan_through(np.array([start, goal]))
+        pts = np.asarray(route.waypoints)
+        assert pts[1][1] > start[1]  # the first waypoint is ahead, into the room
+        assert pts[:, 1].min() >= start[1] - 1e-9
+        # ... and the door is still crossed through its centre along its normal
+        assert any(math.dist(q, door) < 0.05 for q in pts)
+    # from the corridor the crossing still starts at its approach point
+    pts = np.asarray(planner.plan_through(np.array([(9.77, 1.5), (9.35, 3.03)])).waypoints)
+    assert pts[1][1] < door[1] - 0.3 and abs(pts[1][0] - door[0]) < 0.05
+
+
 def test_a_goal_given_while_touching_an_obstacle_backs_off_first() -> None:
     # the noisy tour, seed 2: following its tutor round the mop bucket, the robot stopped
     # against the bucket's corner; each new follow goal (beyond the bucket) collided at once,

@@ -55,6 +55,18 @@ particles at most by the inverse of its class's share of the map (1.3× in CSAIL
 2.3× in its corridors), a sequence of labels by much more. Recovery's particles are, as in
 augmented MCL, a heuristic: they enter with the weight of the others.
 
+**The label-history reset** (``history_reset``): recovery draws new particles only when the
+short-term average of the fit falls below the long-term one, and in global localization the
+long-term average still holds the low fit of the uniform start tens of metres later (it moves
+by ``alpha_slow`` = 0.001 per update): a filter that converged on a wrong place the laser
+fits well (a corridor like the true one) is not told. The label history is: at each
+resampling (once half of ``proposal_history`` has labels) a share ``1 − (L_p/L_q)^T`` of the
+particles is drawn anew from the history proposal, ``L_p`` the per-label likelihood of the
+history's labels at the particles (the weighted geometric mean of ``Pr(z_j | y)``) and ``L_q``
+the same at the places the proposal draws (:meth:`ParticleFilter.history_fit`) — a sensor
+resetting (Lenser and Veloso 2000: the share of new samples is one minus the ratio of the
+observation's likelihood to what a good fit has) with the label sequence as the observation.
+
 :meth:`ParticleFilter.estimate` gives the pose (weighted mean of the heaviest cluster:
 particles within ``cluster_radius`` of the heaviest 0.5 m cell), its covariance and the
 cluster's share of the weight. Global localization starts from :meth:`init_uniform`, pose

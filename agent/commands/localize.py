@@ -121,6 +121,15 @@ def register(subparsers: Any) -> None:
         help="recovery (augmented MCL) watches how well the particles' places explain the labels as "
         "well as the scans",
     )
+    sem.add_argument(
+        "--semantic-reset",
+        type=float,
+        default=0.0,
+        metavar="T",
+        help="with --semantic-history: at each resampling draw a share 1 - (L_p/L_q)^T of the particles "
+        "anew from the history proposal, L_p and L_q the per-label likelihood of the label history at the "
+        "particles and at the proposal's places (default 0: off; the evaluation's target row: 1)",
+    )
     p.add_argument("--particles", type=int, default=10_000, help="particles (default 10000)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument(
@@ -210,6 +219,7 @@ def _localize(args: argparse.Namespace) -> int:
         semantic_proposal=args.semantic_proposal,
         proposal_history=args.semantic_history,
         semantic_recovery=args.semantic_recovery,
+        history_reset=args.semantic_reset,
     )
     pf = ParticleFilter(field, prm, semantic=semantic, rng=np.random.default_rng(args.seed))
     mount = np.asarray(run.mount)

@@ -55,6 +55,18 @@ particles at most by the inverse of its class's share of the map (1.3× in CSAIL
 2.3× in its corridors), a sequence of labels by much more. Recovery's particles are, as in
 augmented MCL, a heuristic: they enter with the weight of the others.
 
+**The label-history reset** (``history_reset``): recovery draws new particles only when the
+short-term average of the fit falls below the long-term one, and in global localization the
+long-term average still holds the low fit of the uniform start tens of metres later (it moves
+by ``alpha_slow`` = 0.001 per update): a filter that converged on a wrong place the laser
+fits well (a corridor like the true one) is not told. The label history is: at each
+resampling (once half of ``proposal_history`` has labels) a share ``1 − (L_p/L_q)^T`` of the
+particles is drawn anew from the history proposal, ``L_p`` the per-label likelihood of the
+history's labels at the particles (the weighted geometric mean of ``Pr(z_j | y)``) and ``L_q``
+the same at the places the proposal draws (:meth:`ParticleFilter.history_fit`) — a sensor
+resetting (Lenser and Veloso 2000: the share of new samples is one minus the ratio of the
+observation's likelihood to what a good fit has) with the label sequence as the observation.
+
 :meth:`ParticleFilter.estimate` gives the pose (weighted mean of the heaviest cluster:
 particles within ``cluster_radius`` of the heaviest 0.5 m cell), its covariance and the
 cluster's share of the weight. Global localization starts from :meth:`init_uniform`, pose
@@ -115,6 +127,15 @@ class MclParams:
             of the last ``proposal_history`` metres, one per metre, at the places the
             odometry ``o`` puts them behind each candidate ``x`` — a sequence such as room,
             doorway, corridor fits far fewer places than its last label does.
+        history_reset: a semantic sensor resetting from the label history (0: off; needs
+            ``proposal_history``): at each resampling, once half of ``proposal_history`` has
+            labels, a share ``1 − (L_p / L_q)^history_reset`` of the particles is drawn anew
+            from the history proposal, ``L_p`` the per-label likelihood of the history at the
+            particles (their weighted geometric mean) and ``L_q`` the same at the places the
+            history proposal draws. Particles whose past labels fit as well as the best
+            places of the map's stay; particles on a wrong place, which the laser alone
+            can fit for tens of metres (recovery's long-term average then still holds the
+            uniform start's low fit), are replaced where the labels say.
         update_distance, update_angle: metres, radians of motion between measurement updates.
         resample_threshold: resample when the effective sample size is below this share of N.
         alpha_slow, alpha_fast: the averaging rates of augmented MCL (``alpha_fast`` 0: no
@@ -139,6 +160,7 @@ class MclParams:
     semantic_proposal: bool = False
     proposal_history: float = 0.0
     semantic_recovery: bool = False
+    history_reset: float = 0.0
     update_distance: float = 0.2
     update_angle: float = 0.2
     resample_threshold: float = 0.5
@@ -167,6 +189,8 @@ class MclParams:
             )
         if not (math.isfinite(self.proposal_history) and self.proposal_history >= 0):
             raise ValueError(f"proposal_history must be >= 0 metres, got {self.proposal_history!r}")
+        if not (math.isfinite(self.history_reset) and self.history_reset >= 0):
+            raise ValueError(f"history_reset must be >= 0, got {self.history_reset!r}")
         if not (math.isfinite(self.semantic_distance) and self.semantic_distance >= 0):
             raise ValueError(f"semantic_distance must be >= 0 metres, got {self.semantic_distance!r}")
         if not (0 <= self.alpha_slow <= 1 and 0 <= self.alpha_fast <= 1):
@@ -501,6 +525,16 @@ class ParticleFilter:
         while hist and self._driven - hist[0][0] > self.params.proposal_history:
             hist.pop(0)
 
+    def _past(self) -> tuple[np.ndarray, np.ndarray]:
+        """The history's labels before this update: ``(H, 3)`` their odometry poses relative
+        to the current one and ``(H, K + 1)`` their log-likelihoods per class."""
+        assert self._odom is not None
+        past = [(o, lik) for at, o, lik in self._history if self._driven - at > 0.5 * _HISTORY_STEP]
+        if not past:
+            return np.zeros((0, 3)), np.zeros((0, 0))
+        rel = np.array([between(self._odom, o) for o, _ in past])
+        return rel, np.log(np.array([lik for _, lik in past]))
+
     def history_draw(self, n: int) -> np.ndarray:
         """``(n, 3)`` poses drawn in proportion to the current label and the labels of the
         history (``proposal_history``; see :class:`MclParams`): :data:`_OVERSAMPLE` times ``n``
@@ -508,15 +542,32 @@ class ParticleFilter:
         labels fit at the places the odometry puts them behind each candidate."""
         assert self.semantic is not None and self._likelihood is not None and self._odom is not None
         cand = self.semantic_draw(_OVERSAMPLE * n, self._likelihood)
-        past = [(o, lik) for at, o, lik in self._history if self._driven - at > 0.5 * _HISTORY_STEP]
-        if not past:
+        rel, loglik = self._past()
+        if not rel.shape[0]:
             return cand[:n]
-        rel = np.array([between(self._odom, o) for o, _ in past])
-        loglik = np.log(np.array([lik for _, lik in past]))
         score = history_scores(cand, rel, loglik, self.semantic.labels, self.field.resolution)
         p = np.exp(score - score.max())
         distinct = np.count_nonzero(p) >= n  # (scores far below the best underflow to 0)
         return cand[self.rng.choice(cand.shape[0], n, replace=not distinct, p=p / p.sum())]
+
+    def history_fit(self) -> tuple[float, float]:
+        """``(L_p, L_q)``: the per-label likelihood of the label history (the geometric mean of
+        ``Pr(z_j | y)`` over its labels) at the particles (weighted) and at the places the
+        history proposal draws (:data:`_OVERSAMPLE` × 1,000 candidates from the current label,
+        averaged in proportion to their history likelihood); ``(1, 1)`` without history."""
+        assert self.semantic is not None and self._likelihood is not None and self._odom is not None
+        rel, loglik = self._past()
+        h = rel.shape[0]
+        if not h:
+            return 1.0, 1.0
+        lab, res = self.semantic.labels, self.field.resolution
+        own = history_scores(np.ascontiguousarray(self.particles), rel, loglik, lab, res)
+        cand = self.semantic_draw(_OVERSAMPLE * 1000, self._likelihood)
+        score = history_scores(cand, rel, loglik, lab, res)
+        p = np.exp(score - score.max())
+        a_p = float(np.sum(self.weights * own) / np.sum(self.weights))
+        a_q = float(np.sum(p * score) / np.sum(p))
+        return math.exp(a_p / h), math.exp(a_q / h)
 
     def _apply(self, logw: np.ndarray, fit: np.ndarray | None) -> None:
         prm = self.params
@@ -552,9 +603,21 @@ class ParticleFilter:
         idx = np.searchsorted(cum, positions)
         P = self.particles[idx]
         inject = 0
+        share = 0.0
         if prm.alpha_fast > 0 and self._w_slow > 0:
             share = max(0.0, 1.0 - self._w_fast / self._w_slow)
-            inject = int(self.rng.binomial(n, min(share, 1.0))) if share > 0 else 0
+        if (
+            prm.history_reset > 0
+            and prm.semantic_proposal
+            and prm.proposal_history > 0
+            and self.semantic is not None
+            and self._likelihood is not None
+            and len(self._history) > 0.5 * prm.proposal_history / _HISTORY_STEP
+        ):
+            l_p, l_q = self.history_fit()
+            share = max(share, 1.0 - min(l_p / l_q, 1.0) ** prm.history_reset)
+        if share > 0:
+            inject = int(self.rng.binomial(n, min(share, 1.0)))
         if inject:
             if prm.semantic_proposal and self.semantic is not None and self._likelihood is not None:
                 new = (

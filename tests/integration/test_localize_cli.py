@@ -70,7 +70,8 @@ def test_global_localization_with_the_semantic_proposal(recording: tuple) -> Non
     rec, yaml, lab = recording
     done = loci(
         "localize", yaml, "--recording", rec, "--labels", lab, "--particles", "2000", "--semantic-proposal",
-        "--semantic-history", "10", "--semantic-recovery", "--semantic-weight", "0.3", "--json",
+        "--semantic-history", "10", "--semantic-recovery", "--semantic-weight", "0.3", "--semantic-reset", "1",
+        "--json",
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     s = json.loads(done.stdout)

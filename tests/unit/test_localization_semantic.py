@@ -203,3 +203,38 @@ def test_history_scores_by_hand() -> None:
     # (3.5, 1.5): behind (2.5, 1.5) corridor 0.2, ahead (4.5, 1.5) outside 0.5
     want = np.log([0.8 * 0.7, 0.8 * 0.5, 0.2 * 0.3, 0.2 * 0.5])
     assert np.allclose(got, want)
+
+
+def test_history_reset_redraws_the_particles_whose_past_labels_do_not_fit(setting: tuple) -> None:
+    _, lf, sm, truth, R, odo = setting
+    proba = _labels_along(truth)
+    out = {}
+    for reset in (0.0, 1.0):
+        for start in ("right", "wrong"):
+            prm = MclParams(
+                particles=2000,
+                laser=False,
+                semantic_proposal=True,
+                proposal_history=10.0,
+                alpha_fast=0.0,  # no augmented recovery: what is drawn anew is the reset's
+                resample_threshold=1.0,
+                history_reset=reset,
+            )
+            pf = ParticleFilter(lf, prm, semantic=sm, rng=np.random.default_rng(8))
+            # the robot drives 5.5 m along the corridor; the filter believes it in the left room
+            pf.init_pose(truth[0] if start == "right" else [0.5, 8.0, 0.0])
+            i = 0
+            while truth[i, 0] < 6.3:
+                pf.update(odo[i], R[i], ANGLES, range_max=RANGE_MAX, proba=proba[i])
+                i += 1
+            l_p, l_q = pf.history_fit()
+            out[reset, start] = (l_p / l_q, pf.injected, float(np.mean(_in_corridor(pf.particles))))
+    # where the particles are right their labels fit as well as the best places do
+    assert out[0.0, "right"][0] > 0.9 and out[1.0, "right"][1] == 0
+    # in the room, the corridor's labels fit far worse there
+    assert out[0.0, "wrong"][0] < 0.5
+    # without the reset nothing leaves the room; with it most particles are in the corridor
+    assert out[0.0, "wrong"][1] == 0 and out[0.0, "wrong"][2] < 0.05
+    assert out[1.0, "wrong"][1] > 1000 and out[1.0, "wrong"][2] > 0.8
+    with pytest.raises(ValueError):
+        MclParams(history_reset=-1.0)

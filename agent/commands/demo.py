@@ -79,9 +79,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument(
         "--odometry",
         choices=("exact", "noisy"),
-        default="exact",
-        help="exact (default): the simulated odometry is the true pose; noisy: the base's odometry drifts "
-        "(drivers.sim.base.OdometryNoise) and the agent tracks its pose by scan matching on its own thread",
+        default="noisy",
+        help="noisy (default): the base's odometry drifts (drivers.sim.base.OdometryNoise) and the agent "
+        "tracks its pose by scan matching on its own thread; exact: the simulated odometry is the true pose",
     )
     p.add_argument(
         "--json",

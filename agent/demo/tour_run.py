@@ -55,7 +55,7 @@ class DemoOptions:
     #: "exact" (the simulator's odometry is the true pose) or "noisy" (the base's default
     #: odometry noise, drivers.sim.base.OdometryNoise, and the agent tracks its pose by scan
     #: matching: [localization] tracking; docs/localization.md)
-    odometry: str = "exact"
+    odometry: str = "noisy"
     timeouts: TourTimeouts = field(default_factory=TourTimeouts)
     startup_timeout: float = 120.0
     #: ``[HOST:]PORT`` of the agent's Foxglove live view (None: none)

@@ -62,49 +62,11 @@ class MappingParams:
             raise ValueError(f"MappingParams.occupied must be in (0, 1], got {self.occupied!r}")
 
 
-@numba.njit(cache=True, nogil=True)
-def _integrate(
-    hits: np.ndarray,
-    misses: np.ndarray,
-    x0: float,
-    y0: float,
-    ex: np.ndarray,
-    ey: np.ndarray,
-    res: float,
-    ox: float,
-    oy: float,
-) -> None:
-    """Trace each beam from ``(x0, y0)`` to ``(ex[i], ey[i])`` (world metres) through the grid
-    whose cell (0, 0) has its lower-left corner at ``(ox, oy)``; row = y index (bottom up).
-    The cells before the end cell get a miss, the end cell a hit."""
-    rows, cols = hits.shape
-    c0 = math.floor((x0 - ox) / res)
-    r0 = math.floor((y0 - oy) / res)
-    for i in range(ex.shape[0]):
-        c1 = math.floor((ex[i] - ox) / res)
-        r1 = math.floor((ey[i] - oy) / res)
-        dc = abs(c1 - c0)
-        dr = abs(r1 - r0)
-        sc = 1 if c1 > c0 else -1
-        sr = 1 if r1 > r0 else -1
-        err = dc - dr
-        c, r = c0, r0
-        while c != c1 or r != r1:  # Bresenham's walk
-            if 0 <= r < rows and 0 <= c < cols:
-                misses[r, c] += 1
-            e2 = 2 * err
-            if e2 > -dr:
-                err -= dr
-                c += sc
-            if e2 < dc:
-                err += dc
-                r += sr
-        if 0 <= r1 < rows and 0 <= c1 < cols:
-            hits[r1, c1] += 1
-
-
 #: metres of room kept around the grid in memory, each side (at least half the grid's size)
 _ROOM = 40.0
+
+#: ``out`` of :func:`_integrate` when the changes are not listed
+_NO_CHANGES = np.empty((0, 3), dtype=np.int64)
 
 #: cell states in :meth:`ScanMapper.take_changes`
 CELL_UNKNOWN, CELL_FREE, CELL_OCCUPIED = 0, 1, 2
@@ -120,7 +82,7 @@ def _state(h: int, m: int, occupied: float) -> int:
 
 
 @numba.njit(cache=True, nogil=True)
-def _integrate_changes(
+def _integrate(
     hits: np.ndarray,
     misses: np.ndarray,
     x0: float,
@@ -132,11 +94,14 @@ def _integrate_changes(
     oy: float,
     occupied: float,
     out: np.ndarray,
+    track: bool,
 ) -> int:
-    """:func:`_integrate`, and every count that changes a cell's state (unknown 0, free 1,
-    occupied 2: :meth:`ScanMapper.window`'s rule) appends ``(row, col, new state)`` to
-    ``out``, in order; returns how many rows it wrote (``out`` must have room for one per
-    cell visited)."""
+    """Trace each beam from ``(x0, y0)`` to ``(ex[i], ey[i])`` (world metres) through the grid
+    whose cell (0, 0) has its lower-left corner at ``(ox, oy)``; row = y index (bottom up).
+    The cells before the end cell get a miss, the end cell a hit. With ``track``, every count
+    that changes a cell's state (unknown 0, free 1, occupied 2: :meth:`ScanMapper.window`'s
+    rule) appends ``(row, col, new state)`` to ``out``, in order (``out`` must have room for
+    one per cell visited); returns how many rows it wrote."""
     rows, cols = hits.shape
     n = 0
     c0 = math.floor((x0 - ox) / res)
@@ -150,15 +115,15 @@ def _integrate_changes(
         sr = 1 if r1 > r0 else -1
         err = dc - dr
         c, r = c0, r0
-        while c != c1 or r != r1:  # Bresenham's walk, as in _integrate
+        while c != c1 or r != r1:  # Bresenham's walk
             if 0 <= r < rows and 0 <= c < cols:
                 h, m = hits[r, c], misses[r, c]
-                before = _state(h, m, occupied)
                 misses[r, c] = m + 1
-                after = _state(h, m + 1, occupied)
-                if after != before:
-                    out[n, 0], out[n, 1], out[n, 2] = r, c, after
-                    n += 1
+                if track:
+                    before, after = _state(h, m, occupied), _state(h, m + 1, occupied)
+                    if after != before:
+                        out[n, 0], out[n, 1], out[n, 2] = r, c, after
+                        n += 1
             e2 = 2 * err
             if e2 > -dr:
                 err -= dr
@@ -168,12 +133,12 @@ def _integrate_changes(
                 r += sr
         if 0 <= r1 < rows and 0 <= c1 < cols:
             h, m = hits[r1, c1], misses[r1, c1]
-            before = _state(h, m, occupied)
             hits[r1, c1] = h + 1
-            after = _state(h + 1, m, occupied)
-            if after != before:
-                out[n, 0], out[n, 1], out[n, 2] = r1, c1, after
-                n += 1
+            if track:
+                before, after = _state(h, m, occupied), _state(h + 1, m, occupied)
+                if after != before:
+                    out[n, 0], out[n, 1], out[n, 2] = r1, c1, after
+                    n += 1
     return n
 
 
@@ -283,13 +248,13 @@ class ScanMapper:
         ox, oy = self._origin
         res = self.params.resolution
         if not self._track_changes:
-            _integrate(self._hits, self._misses, x, y, ex, ey, res, ox, oy)
+            _integrate(self._hits, self._misses, x, y, ex, ey, res, ox, oy, prm.occupied, _NO_CHANGES, False)
             return
         # room for one change per cell visited: a beam visits at most |dc| + |dr| + 1 cells,
         # |dc| <= |Δx| / res + 1 (likewise |dr|)
         cap = int(np.sum(np.abs(ex - x) + np.abs(ey - y)) / res) + 3 * int(ex.size) + 1
         out = np.empty((cap, 3), dtype=np.int64)
-        n = _integrate_changes(self._hits, self._misses, x, y, ex, ey, res, ox, oy, prm.occupied, out)
+        n = _integrate(self._hits, self._misses, x, y, ex, ey, res, ox, oy, prm.occupied, out, True)
         if n:
             ch = out[:n].copy()
             ch[:, 0] -= self._anchor[0]

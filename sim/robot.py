@@ -16,8 +16,9 @@ One world — a generated office (``gen:SEED``, ``tour:SEED``) or a map file —
 * what the base does: follow a scripted route (given waypoints, or a tour of the building's
   rooms through their doors, :mod:`sim.route`), a velocity command, or a goal (a
   pose or a path, in the odometry or the map frame; planned around walls unless told not;
-  a planned goal given while the base stands against an obstacle backs off to clear space
-  first, as a real base's local planner would, instead of stopping at once).
+  a planned goal given while the base stands against an obstacle, or right after its last
+  goal ended in a collision, backs off straight away from the obstacle first, as a real
+  base's local planner would, instead of stopping at once).
 
 Every step the listeners get a :class:`RobotSample` (odometry in frame ``"odom"``, the true
 pose in frame ``"map"``, the place class at the true pose); goal and motion events are
@@ -675,12 +676,16 @@ class SimRobot:
             pts = np.column_stack((truth.x + c * d[:, 0] - s * d[:, 1], truth.y + s * d[:, 0] + c * d[:, 1]))
             heading = None if heading is None else heading + dth
         here = np.array([[truth.x, truth.y]])
-        if goal.plan and float(self.world.clearance(here[0])) < self.base.radius + TOUCHING:
+        start = here
+        stopped = self.base.status is BaseStatus.COLLIDED  # by the last goal, and not moved since
+        if goal.plan and (stopped or float(self.world.clearance(here[0])) < self.base.radius + TOUCHING):
             # stopped against an obstacle (a follower cutting a corner behind its person): back
-            # off to the nearest clear point first, or every new goal would stop at once
-            clear = np.asarray(self.planner.nearest_clear(here[0]))
-            if math.dist(clear, here[0]) <= SNAP_DISTANCE:
-                pts = np.vstack([clear, pts])
+            # off straight away from its nearest cell first, then plan from there; else every
+            # new goal would stop at once (a route's first leg may run along the obstacle,
+            # whose cells' clearances the base compares)
+            away = self._away_from_obstacle(here[0])
+            if away is not None:
+                start = np.vstack([here, away])
         if goal.plan:
             # waypoints hugging an obstacle (a follower aiming beside a narrow gap, a doorway
             # node seen through drifted odometry): the nearest points the planner keeps clear
@@ -694,7 +699,9 @@ class SimRobot:
                         pts[i] = q
         try:
             if goal.plan:
-                path = self.planner.plan_through(np.vstack([here, pts])).dense()
+                path = self.planner.plan_through(np.vstack([start[-1:], pts])).dense()
+                if len(start) > 1:
+                    path = np.vstack([start[:1], path])
             else:
                 path = resample(np.vstack([here, pts]), self.planner.params.spacing)
         except (MapError, ValueError) as exc:
@@ -705,6 +712,25 @@ class SimRobot:
         self._deadline = self.base.time + GOAL_SLACK_S + 3.0 * length / self.base.limits.v_max
         self._drive(path, heading)
         self._report("active", f"{length:.1f} m")
+
+    def _away_from_obstacle(self, xy: np.ndarray, distance: float = 0.15) -> np.ndarray | None:
+        """The point ``distance`` metres from ``xy`` straight away from the nearest occupied
+        cell within a metre (None: none there)."""
+        g = self.grid
+        rc = g.world_to_cell(np.asarray(xy, dtype=np.float64))
+        k = math.ceil(1.0 / g.resolution)
+        r0, c0 = max(int(rc[0]) - k, 0), max(int(rc[1]) - k, 0)
+        occ = g.occupied[r0 : int(rc[0]) + k + 1, c0 : int(rc[1]) + k + 1]
+        cells = np.argwhere(occ)
+        if cells.size == 0:
+            return None
+        centres = g.cell_to_world(cells + np.array([r0, c0]))
+        d = np.asarray(xy, dtype=np.float64) - centres
+        j = int(np.argmin(np.hypot(d[:, 0], d[:, 1])))
+        n = float(np.hypot(*d[j]))
+        if n < 1e-9:
+            return None
+        return np.asarray(xy, dtype=np.float64) + distance * d[j] / n
 
     def _drive(self, path: np.ndarray, heading: float | None) -> None:
         """Follow ``path`` ``(m, 2)`` (its first point: about here), stopping at sharp corners."""

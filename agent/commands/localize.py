@@ -69,7 +69,7 @@ def register(subparsers: Any) -> None:
         type=Path,
         metavar="FILE.json",
         help='the classifier\'s statistics P(z | y): {"classes": [...], "matrix": [[...]]} (rows: true '
-        f"class y; default: right {DEFAULT_HIT:.0%} of the time, errors spread evenly)",
+        f"class y; default: right {DEFAULT_HIT * 100:.0f} %% of the time, errors spread evenly)",
     )
     p.add_argument(
         "--initial",

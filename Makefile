@@ -32,6 +32,8 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	@# compile the per-scan kernels into numba's cache once, so no run starts cold
+	$(BIN)/python -m agent.core.warmup
 	@touch $@
 
 $(BENCH_STAMP): $(STAMP)

@@ -63,6 +63,7 @@ from agent.bus.testing import session_pair, settle, wait_until
 from agent.commands.options import add_json_file_option, add_json_option, emit_result
 from agent.core.odom_sync import OdomSync
 from agent.core.pipeline import PeopleParams, Pipeline, PipelineParams, place_message
+from agent.core.warmup import warm_up
 from drivers.messages import LaserScan
 from drivers.sick import telegrams as tg
 from drivers.sick.codec import StreamParser, Telegram
@@ -93,7 +94,7 @@ def scan_from_telegram(t: Telegram, stamp: float, seq: int) -> LaserScan:
 
 def load_model() -> PlaceModel:
     model = PlaceModel.load(default_model_path())
-    Pipeline.warm_up(model)
+    warm_up(model)
     return model
 
 

@@ -34,6 +34,7 @@ import numpy as np
 
 from agent.commands.options import add_json_file_option, add_json_option, emit_result
 from agent.core.pipeline import Pipeline, PipelineParams
+from agent.core.warmup import warm_up
 from agent.live.probe import connect
 from agent.live.server import LiveView
 from drivers.messages import LaserScan, Pose2D
@@ -121,7 +122,7 @@ def _pct(values: list[float]) -> dict[str, float]:
 def run(n_scans: int) -> dict[str, Any]:
     model = PlaceModel.load(default_model_path())
     params = PipelineParams()
-    Pipeline.warm_up(model, params)
+    warm_up(model, params)
     scans = drive(n_scans)
     pipes = {k: Pipeline(model, params) for k in ("off", "idle", "watched")}
     idle = LiveView("127.0.0.1", 0, name="bench idle")

@@ -44,6 +44,7 @@ def per_scan(path: Path, model: Any, people: bool, limit: int | None) -> np.ndar
     from agent.bus.codecs import LASER_SCAN_CODEC, POSE_CODEC, checked_decode
     from agent.core.odom_sync import OdomSync, SyncParams
     from agent.core.pipeline import PeopleParams, Pipeline, PipelineParams
+    from agent.core.warmup import warm_up
     from agent.recording.offline import read_recording_metadata
     from agent.recording.replay import McapMessages
 
@@ -62,7 +63,7 @@ def per_scan(path: Path, model: Any, people: bool, limit: int | None) -> np.ndar
             )
     pairs += sync.close()
     pairs = pairs[:limit] if limit else pairs
-    Pipeline.warm_up(model, params)
+    warm_up(model, params)
     pipeline = Pipeline(model, params)
     ms = np.empty(len(pairs))
     for i, m in enumerate(pairs):

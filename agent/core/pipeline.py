@@ -717,24 +717,6 @@ class Pipeline:
             doc, when
         )
 
-    @staticmethod
-    def warm_up(
-        model: PlaceModel, params: PipelineParams | None = None, *, people_detector: LegDetector | None = None
-    ) -> None:
-        """Run a throwaway pipeline on synthetic front and 360° scans, so the compiled kernels
-        are ready before the first real scan (the first call of each takes a while)."""
-        # the tracker inline: its kernels compile here, not on a thread left behind
-        p = Pipeline(
-            model, replace(params or PipelineParams(), tracking_lag=0), people_detector=people_detector
-        )
-        for i, (n, fov) in enumerate(((361, math.pi), (360, TWO_PI))):
-            inc = fov / (n - 1) if fov < TWO_PI else fov / n
-            angle_min = -fov / 2 if fov < TWO_PI else 0.0
-            a = angle_min + np.arange(n) * inc
-            ranges = np.minimum(4.0 / np.maximum(np.abs(np.cos(a)), 0.2), 10.0).astype(np.float32)
-            scan = LaserScan(float(i), i, "laser", angle_min, inc, 30.0, ranges)
-            p.process(scan, Pose2D(0.1 * i, 0.0, 0.0, stamp=float(i)))
-
 
 def smooth_correction(
     applied: np.ndarray, raw: np.ndarray, sensor: np.ndarray, dt: float, tau: float

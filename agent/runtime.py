@@ -471,18 +471,24 @@ class Agent:
 
     async def _start_lms(self, stop: asyncio.Event) -> bool:
         from drivers.sick.driver import LMS2xx
+        from drivers.threaded import ThreadedSource
 
         lc = self.config.laser
         angle, resolution = lc.angle_resolution
         assert lc.port is not None
-        self._lms = LMS2xx(
-            lc.port,
-            baud=lc.baud,
-            angle=angle,
-            resolution=resolution,
-            frame_id=lc.frame_id,
-            queue_size=lc.queue_size,
-            timeout=lc.timeout,
+        # the serial line is read and each scan stamped on a thread of its own: a scan that
+        # takes long to process never delays reading the next ones (drivers/threaded.py)
+        self._lms = ThreadedSource(
+            LMS2xx(
+                lc.port,
+                baud=lc.baud,
+                angle=angle,
+                resolution=resolution,
+                frame_id=lc.frame_id,
+                timeout=lc.timeout,
+            ),
+            capacity=lc.queue_size,
+            name="lms",
         )
         start = asyncio.create_task(self._lms.start(), name="laser start")
         stopper = asyncio.create_task(stop.wait())
@@ -884,7 +890,11 @@ class Agent:
         if pipeline is not None:
             out["graph"] = {"nodes": len(pipeline.graph), "areas": len(pipeline.areas.areas)}
         if self._lms is not None:
-            out["laser"] = self._lms.stats.as_dict()
+            out["laser"] = {
+                **self._lms.stats.as_dict(),
+                "behind": self._lms.dropped,
+                "waiting": self._lms.waiting,
+            }
         return out
 
     # ------------------------------------------------------------------ shutdown
@@ -967,7 +977,7 @@ class Agent:
         r.scans_processed = self.pipeline.scans if self.pipeline else 0
         r.restarts = self.restarts.as_dict()
         r.drops = {
-            "driver": self._lms.stats.dropped if self._lms is not None else 0,
+            "driver": self._lms.stats.dropped + self._lms.dropped if self._lms is not None else 0,
             "scan_queue": snap.get("scan", {}).get("dropped", 0) if self._scan_sub is not None else 0,
             "odom_queue": snap.get("odom", {}).get("dropped", 0),
             **s.drops(),

@@ -24,14 +24,20 @@ Every step the listeners get a :class:`RobotSample` (odometry in frame ``"odom"`
 pose in frame ``"map"``, the place class at the true pose); goal and motion events are
 :class:`StatusReport` s. Listeners run on the robot's thread and must return quickly.
 
-Time: simulated seconds advance ``speed`` times as fast as the wall clock. The robot's thread
-stamps each step with the wall clock when it computes it, as a real base stamps odometry
-when it reads its encoders; the LMS driver stamps the pty's scans with the host's clock too,
-so both agree whatever the speed (with ``speed`` K the robot just looks K times as fast),
-and a thread the machine starves for a moment makes late stamps, not stale ones. A thread
-more than a second behind skips ahead instead of replaying the lost time. Stepped by hand
-(:meth:`SimRobot.step` without a stamp), stamps are the start time plus simulated seconds
-divided by ``speed``: deterministic.
+Time: simulated seconds advance ``speed`` times as fast as the wall clock, and every step is
+stamped with the wall-clock time its simulated time stands for (the start time plus the
+simulated seconds divided by ``speed``), as a real base's encoders measure the motion when it
+happens, whoever reads them when. The simulation is a function of that clock:
+:meth:`SimRobot.advance_to` steps it up to a time (under a lock), and the robot's thread
+calls it every period; the virtual LMS asks for the world at each scan's measurement time
+(:meth:`SimRobot.sensor_pose_at`, the legs likewise), which advances the simulation first
+if its thread is behind, and interpolates the steps around that time. So a thread the
+machine starves for a moment delays when odometry and scans are *delivered*, never what
+they say or their stamps: the catch-up steps carry the stamps of the times they simulate,
+and the scan measured at time t sees the robot where it was at t. A robot more than
+:data:`MAX_CATCH_UP` seconds behind skips ahead (the world stands still over the gap,
+logged) instead of replaying the lost time. Stepped by hand (:meth:`SimRobot.step` without a
+stamp), stamps are the start time plus simulated seconds divided by ``speed``: deterministic.
 
 The thread-safe commands (:meth:`SimRobot.command_velocity`, :meth:`SimRobot.send_goal`,
 :meth:`SimRobot.cancel`) are queued and applied at the next step. Without :meth:`start`,
@@ -40,6 +46,7 @@ The thread-safe commands (:meth:`SimRobot.command_velocity`, :meth:`SimRobot.sen
 
 from __future__ import annotations
 
+import bisect
 import collections
 import logging
 import math
@@ -75,6 +82,8 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 Point = tuple[float, float]
+#: One step in the lasers' history: stamp, the sensor's world x, y, heading, (L, 2) leg centres.
+_Step = tuple[float, float, float, float, np.ndarray]
 
 #: What the base is doing, as :class:`StatusReport` says it.
 STATUSES = ("idle", "velocity", "route", "active", "reached", "collided", "failed", "cancelled")
@@ -86,6 +95,10 @@ GOAL_SLACK_S = 30.0
 SNAP_DISTANCE = 0.5
 #: Metres of clearance beyond the base's radius within which it counts as touching an obstacle.
 TOUCHING = 0.03
+#: Seconds the simulation may fall behind the wall clock before it skips ahead.
+MAX_CATCH_UP = 1.0
+#: Seconds of steps kept for the lasers' look-ups at a scan's measurement time.
+HISTORY = 3.0
 #: Furniture kinds shown to the camera, as catalogue kinds of :mod:`sim.objects`.
 _PICTURE_KIND = {
     "couch": "couch",
@@ -137,6 +150,8 @@ class SimRobotConfig:
         lms_rate: LMS scans per second (None: the scanner's own, 37.5 Hz at 0.5°).
         lms_variant: LMS power-up ``(angle degrees, resolution degrees)``.
         lms_units: ``"cm"`` or ``"mm"``.
+        lms_index: the LMS is configured to send real-time scan indices (a scanner set up
+            with SICK's configuration tool or ``lms_config``), which the driver stamps from.
         beams, scan_range, scan_rate: the 360° laser's beams per turn, range (m) and scans
             per simulated second.
         noise: laser range noise, metres (standard deviation, hits only).
@@ -166,6 +181,7 @@ class SimRobotConfig:
     lms_rate: float | None = None
     lms_variant: tuple[int, float] = (180, 0.5)
     lms_units: str = "cm"
+    lms_index: bool = True
     beams: int = 360
     scan_range: float = 30.0
     scan_rate: float = 10.0
@@ -338,11 +354,16 @@ class SimRobot:
         self.legs = [Leg(self._leg_position(p, k), p.gait.leg_radius) for p in self.people for k in (0, 1)]
         self._sensor = cfg.mount.apply(start)
         self._truth = self.base.true_pose
+        self._lock = threading.RLock()  # the simulation's state: stepped by the robot's thread or a laser's
+        # (stamp, sensor x, y, heading, (L, 2) leg centres) of the last HISTORY seconds of steps
+        self._history: collections.deque[_Step] = collections.deque(
+            maxlen=max(8, int(HISTORY * cfg.odom_rate / cfg.speed) + 2)
+        )
         self.lms: VirtualLMS | None = None
         self._lms_world: LmsWorld | None = None
         if cfg.laser == "front":
             lms_world = self._lms_world = LmsWorld(
-                self.grid, lambda t: self._sensor, self.legs, noise_std=cfg.noise, seed=cfg.seed
+                self.grid, self._lms_sensor_pose, self._lms_legs(), noise_std=cfg.noise, seed=cfg.seed
             )
             angle, res = cfg.lms_variant
             self.lms = VirtualLMS(
@@ -352,6 +373,7 @@ class SimRobot:
                 angle=angle,
                 resolution=res,
                 units=cfg.lms_units,
+                realtime_index=cfg.lms_index,
                 seed=cfg.seed,
             )
         self.camera = (
@@ -380,6 +402,7 @@ class SimRobot:
         self.scan_listeners: list[Callable[[LaserScan], None]] = []
         self.frame_listeners: list[Callable[[CameraFrame], None]] = []
         self._stop = threading.Event()
+        self._running = False
         self._threads: list[threading.Thread] = []
         self.latest: RobotSample | None = None
         if self.route is not None:
@@ -429,9 +452,14 @@ class SimRobot:
         """Start the LMS (if any) and the robot's threads; returns the LMS device path."""
         if self._threads:
             raise RuntimeError("the simulated robot is already running")
+        with self._lock:
+            self._origin = time.time() - self.base.time / self.config.speed
+            self._stamp = self._origin + self.base.time / self.config.speed
+            self._history.clear()
+            self._record(self._stamp)
         path = self.lms.start() if self.lms is not None else None
         self._stop.clear()
-        self._origin = time.time() - self.base.time / self.config.speed
+        self._running = True
         self._threads = [threading.Thread(target=self._run, name="sim-robot", daemon=True)]
         if self.camera is not None:
             self._threads.append(threading.Thread(target=self._run_camera, name="sim-camera", daemon=True))
@@ -441,6 +469,7 @@ class SimRobot:
 
     def stop(self) -> None:
         """Stop the threads and the LMS (its device path disappears)."""
+        self._running = False
         self._stop.set()
         for t in self._threads:
             t.join(5.0)
@@ -464,6 +493,11 @@ class SimRobot:
     def sensor_pose(self) -> tuple[float, float, float]:
         """The laser's true world pose ``(x, y, heading)`` after the last step (metres, radians)."""
         return self._sensor
+
+    @property
+    def origin(self) -> float:
+        """The epoch seconds simulated time 0 stands for (see the module docstring)."""
+        return self._origin
 
     def stamp(self) -> float:
         """The stamp of the last step, epoch seconds (see the module docstring)."""
@@ -492,8 +526,8 @@ class SimRobot:
         """
         self.legs.extend(legs)
         if self._lms_world is not None:
-            # the LMS's world keeps its own tuple of legs
-            self._lms_world.legs = tuple(self.legs)
+            # the LMS's world keeps its own tuple of legs: each looked up at the scan's time
+            self._lms_world.legs = tuple(self._lms_legs())
         if on_step is not None:
             self.sample_listeners.append(on_step)
 
@@ -502,8 +536,84 @@ class SimRobot:
         """Advance the simulation by one step (``1/odom_rate`` simulated seconds).
 
         ``stamp``: epoch seconds of the step (default: the start time plus the simulated
-        seconds divided by ``speed``); stamps always increase.
+        seconds divided by ``speed``, the simulated clock); stamps always increase.
         """
+        with self._lock:
+            return self._step(stamp)
+
+    def advance_to(self, stamp: float) -> int:
+        """Step the simulation until its clock reaches ``stamp`` (epoch seconds); returns the
+        steps taken. More than :data:`MAX_CATCH_UP` seconds behind, the clock skips ahead
+        first (the world stands still over the gap)."""
+        speed = self.config.speed
+        n = 0
+        with self._lock:
+            behind = stamp - (self._origin + self.base.time / speed)
+            if behind > MAX_CATCH_UP:
+                log.warning("simulated robot: %.1f s behind the wall clock; skipping ahead", behind)
+                self._origin += behind - self.dt / speed
+            while self._origin + (self.base.time + self.dt) / speed <= stamp:
+                self._step(None)
+                n += 1
+        return n
+
+    def sensor_pose_at(self, stamp: float) -> tuple[float, float, float]:
+        """The laser's true world pose at ``stamp`` (epoch seconds), interpolated between the
+        steps around it (the oldest or newest kept step's beyond them)."""
+        with self._lock:
+            a, b, f = self._around(stamp)
+            dth = math.atan2(math.sin(b[3] - a[3]), math.cos(b[3] - a[3]))
+            return (a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2]), a[3] + f * dth)
+
+    def legs_at(self, stamp: float) -> np.ndarray:
+        """``(L, 2)`` the centres of every leg in the world at ``stamp`` (epoch seconds)."""
+        with self._lock:
+            a, b, f = self._around(stamp)
+            if a[4].shape != b[4].shape:
+                return b[4] if f >= 0.5 else a[4]
+            return np.asarray(a[4] + f * (b[4] - a[4]))
+
+    def _around(self, stamp: float) -> tuple[_Step, _Step, float]:
+        h = self._history
+        if not h:
+            self._record(self._stamp)
+        if stamp <= h[0][0]:
+            return h[0], h[0], 0.0
+        if stamp >= h[-1][0]:
+            return h[-1], h[-1], 0.0
+        i = bisect.bisect_right([e[0] for e in h], stamp)
+        a, b = h[i - 1], h[i]
+        return a, b, (stamp - a[0]) / (b[0] - a[0])
+
+    def _record(self, stamp: float) -> None:
+        t = self.base.time
+        legs = np.array([leg.at(t) for leg in self.legs], dtype=np.float64).reshape(-1, 2)
+        x, y, th = self._sensor
+        self._history.append((stamp, float(x), float(y), float(th), legs))
+
+    def _lms_sensor_pose(self, t: float) -> tuple[float, float, float]:
+        """The LMS's view: ``t`` is seconds since the virtual scanner started."""
+        if self.lms is None or not self._running:
+            return self._sensor
+        stamp = self.lms.epoch(t)
+        self.advance_to(stamp)
+        return self.sensor_pose_at(stamp)
+
+    def _lms_legs(self) -> list[Leg]:
+        def at(k: int) -> Callable[[float], Point]:
+            def pos(t: float) -> Point:
+                if self.lms is None or not self._running:
+                    p = self.legs[k].at(self.base.time)
+                else:
+                    legs = self.legs_at(self.lms.epoch(t))
+                    p = legs[k] if k < legs.shape[0] else self.legs[k].at(self.base.time)
+                return (float(p[0]), float(p[1]))
+
+            return pos
+
+        return [Leg(at(k), leg.radius) for k, leg in enumerate(self.legs)]
+
+    def _step(self, stamp: float | None) -> RobotSample:
         while True:
             try:
                 kind, arg = self._commands.get_nowait()
@@ -516,6 +626,7 @@ class SimRobot:
         self._stamp = stamp = max(t, self._stamp + 1e-6)
         self._after_step(state.status, state.event)
         truth = state.true_pose
+        self._truth = truth
         self._sensor = self.config.mount.apply((truth.x, truth.y, truth.theta))
         space, label = self._ground_truth(truth)
         o = state.odom
@@ -531,6 +642,7 @@ class SimRobot:
         )
         self.latest = sample
         self._notify(self.sample_listeners, sample)
+        self._record(stamp)  # after the listeners: the tutor's legs have moved with this step
         if self.config.laser == "360" and self._steps % self._scan_every == 0:
             self._notify(self.scan_listeners, self.scan_360(stamp))
         return sample
@@ -583,19 +695,14 @@ class SimRobot:
     # ------------------------------------------------------------------ internals
     def _run(self) -> None:
         period = self.dt / self.config.speed
-        next_t = time.monotonic()
         while not self._stop.is_set():
             try:
-                self.step(time.time())
+                self.advance_to(time.time())
             except Exception:  # a broken step must not leave a silent robot behind
                 log.exception("simulated robot: a step failed")
-            next_t += period
-            delay = next_t - time.monotonic()
-            if delay > 0:
-                self._stop.wait(delay)
-            elif delay < -1.0:
-                log.warning("simulated robot: %.1f s behind the wall clock; skipping ahead", -delay)
-                next_t = time.monotonic()
+            with self._lock:
+                due = self._origin + (self.base.time + self.dt) / self.config.speed
+            self._stop.wait(min(period, max(0.0, due - time.time())))
 
     def _run_camera(self) -> None:
         period = 1.0 / self.config.camera_rate

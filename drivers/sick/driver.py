@@ -21,12 +21,17 @@ and retries:
 
 Scans (0xB0) become :class:`~drivers.messages.LaserScan`: ranges in metres (error codes as
 :mod:`drivers.sick.telegrams` says), the first beam at ``-angle/2`` on the sensor's x axis,
-counter-clockwise. ``stamp`` estimates when the first beam was measured: host time of the
-telegram's last byte, minus its transmission time (10 bits per byte at the session baud
-rate), minus the mirror's sweep over the scan (the turns of an interlaced scan plus the
-scanned fraction of the last turn at 75 Hz). The scanner's processing latency is unknown
-and not subtracted. ``seq`` counts scans emitted by this driver (it continues across
-reconnects).
+counter-clockwise. ``stamp`` is when the first beam was measured, on the host's clock
+(:class:`~drivers.sick.stamps.ScanClock`): the arrival — the host time of the telegram's last
+byte, minus its transmission time (10 bits per byte at the session baud rate), minus the
+mirror's sweep over the scan (the turns of an interlaced scan plus the scanned fraction of
+the last turn at 75 Hz) — corrected by the scanner's real-time scan index when its
+configuration sends one (availability 0x02; set it once with SICK's configuration tool):
+then a scan read late, or out of a backlog, keeps the time it was measured. Without the
+index a scan read out of a backlog (more bytes waited behind it, or it came less than half a
+period after the previous one) cannot be placed in time and is dropped (``stale``). The
+scanner's processing latency is unknown and not subtracted. ``seq`` counts scans emitted by
+this driver (it continues across reconnects).
 
 Scans go through a bounded queue that drops the oldest scan when the consumer is slow
 (``dropped`` counts them). A line that is lost — read error, end of file, device node gone,
@@ -63,6 +68,7 @@ from drivers.sick.constants import (
     Reply,
     reply_code,
 )
+from drivers.sick.stamps import ScanClock
 from knowledge.errors import DeviceError, DeviceTimeout, ProtocolError
 
 log = logging.getLogger(__name__)
@@ -100,6 +106,9 @@ class LmsStats:
         telegrams, crc_errors, resyncs, acks, naks: the telegram parser's counters (resyncs
             in bytes skipped).
         scans: scans queued; dropped: scans pushed out of the full queue (oldest first).
+        stale: scans dropped because their time could not be told (a backlog read at once
+            without the scanner's index, a repeated telegram); restamped: scans stamped from
+            the scanner's index more than half a period before they were read.
         bad_scans: 0xB0 telegrams with a good CRC that could not be turned into a scan
             (wrong count for the variant, partial scan, malformed).
         reconnects: successful re-initialisations after a lost line; disconnects: lost lines;
@@ -117,6 +126,8 @@ class LmsStats:
     naks: int = 0
     scans: int = 0
     dropped: int = 0
+    stale: int = 0
+    restamped: int = 0
     bad_scans: int = 0
     reconnects: int = 0
     disconnects: int = 0
@@ -218,6 +229,7 @@ class LMS2xx(SerialDevice[Telegram, Telegram]):
         self._session_baud: int | None = None
         self._active: tuple[int, int] = self.variant or (180, 50)  # (angle deg, resolution 1/100 deg)
         self._seq = 0
+        self._clock = ScanClock(tg.scan_period_s(*self._active))
         self._n_scans = 0
         self._n_dropped = 0
         self._n_bad = 0
@@ -240,6 +252,8 @@ class LMS2xx(SerialDevice[Telegram, Telegram]):
             naks=p.naks,
             scans=self._n_scans,
             dropped=self._n_dropped,
+            stale=self._clock.stats.stale,
+            restamped=self._clock.stats.restamped,
             bad_scans=self._n_bad,
             reconnects=self._n_reconnects,
             disconnects=self._n_disconnects,
@@ -335,7 +349,11 @@ class LMS2xx(SerialDevice[Telegram, Telegram]):
 
     # ------------------------------------------------------------------ line events
     def _data_received(self, data: bytes, t: float) -> None:
-        for event in self._parser.feed(data):
+        events = self._parser.feed(data)
+        # a scan followed by more bytes in this read waited in the port's buffer
+        last = max((i for i, e in enumerate(events) if not isinstance(e, Acknowledge)), default=-1)
+        held = self._parser.pending > 0
+        for i, event in enumerate(events):
             pending = self._pending
             if pending is not None and pending.future.done():
                 pending = None
@@ -351,14 +369,14 @@ class LMS2xx(SerialDevice[Telegram, Telegram]):
             if pending is not None and event.command == pending.reply:
                 pending.future.set_result(event)
             elif event.command == Reply.VALUES and self.expect_data:
-                self._on_values(event, t)
+                self._on_values(event, t, buffered=i < last or held)
 
     def _on_link_lost(self) -> None:
         self._parser.reset()
         if self._pending is not None and not self._pending.future.done():
             self._pending.future.set_exception(LinkLost(f"{self.port}: the line was lost"))
 
-    def _on_values(self, t: Telegram, t_rx: float) -> None:
+    def _on_values(self, t: Telegram, t_rx: float, *, buffered: bool = False) -> None:
         cfg, info, baud = self._config, self._info, self._session_baud
         if cfg is None or info is None or baud is None:
             return
@@ -376,7 +394,10 @@ class LMS2xx(SerialDevice[Telegram, Telegram]):
         angle, res = self._active
         turns = tg.scan_revolutions(angle, res)
         sweep = (turns - 1 + angle / 360.0) / MIRROR_HZ
-        stamp = t_rx - len(t) * 10.0 / baud - sweep
+        stamp = self._clock.stamp(t_rx - len(t) * 10.0 / baud - sweep, mv.realtime_index, buffered=buffered)
+        if stamp is None:  # out of a backlog with no index to place it in time: counted
+            log.debug("%s: dropped a scan read out of a backlog (its time is unknown)", self.port)
+            return
         self._seq += 1
         scan = LaserScan(
             stamp=stamp,
@@ -463,6 +484,7 @@ class LMS2xx(SerialDevice[Telegram, Telegram]):
                 f"the LMS on {self.port} reports a variant this driver cannot read: {exc}"
             ) from exc
         self._active = (angle, res)
+        self._clock.reset(tg.scan_period_s(angle, res))
         cfg = tg.ScannerConfig.decode(
             await self._ask(tg.request_config(), "the configuration", reply_bytes=44)
         )

@@ -58,8 +58,10 @@ from drivers.sick import telegrams as tg
 from drivers.sick.codec import StreamParser, Telegram
 from drivers.sick.constants import (
     ACK,
+    AVAILABILITY_REALTIME_INDEX,
     BAUD_MODES,
     INSTALLATION_PASSWORD,
+    MIRROR_HZ,
     MODE_BAUDS,
     MODE_SWITCH_BAD_PASSWORD,
     MODE_SWITCH_NOT_POSSIBLE,
@@ -86,6 +88,10 @@ class RangeSource(Protocol):
 
 
 log = logging.getLogger(__name__)
+
+#: Seconds of missed scans a starved serving thread still sends when it wakes (older ones
+#: are skipped, as a receive buffer would have overflowed).
+MAX_CATCH_UP = 2.0
 
 #: termios speed constant → baud rate.
 _TERMIOS_BAUDS: dict[int, int] = {
@@ -166,8 +172,22 @@ class VirtualLMS:
         initial_mode: operating mode it starts in (e.g. ``Mode.CONTINUOUS``).
         type_string, software_version, prom_version: what it says about itself.
         faults: line faults to inject.
-        pace: account line time (10 bits per byte); False sends as fast as the pty takes it.
+        pace: account line time (10 bits per byte): a scan whose turn comes while the line
+            still carries the previous one is skipped, as the scanner does at low baud rates;
+            False sends every scan.
+        realtime_index: the configuration's availability has "real-time indices" (0x02): each
+            0xB0 telegram ends with the scan index byte, counting mirror turns modulo 256
+            (scans skipped or lost on the line count too), from which a driver stamps scans
+            whatever its own delays (:mod:`drivers.sick.stamps`).
         seed: seed of the fault generator.
+
+    Scans in continuous mode are measured on the scanner's own schedule (every period from
+    when streaming started) and each is rendered at its measurement time: the beam sweep's
+    start, i.e. the time the last byte leaves the scanner minus the telegram's line time and
+    the sweep (what a driver estimates from the arrival time). A serving thread the machine
+    starved catches up as hardware would have sent: the missed scans back to back, each
+    measured at its own time (at most :data:`MAX_CATCH_UP` seconds of them; older ones are
+    skipped and counted).
     """
 
     def __init__(
@@ -186,6 +206,7 @@ class VirtualLMS:
         prom_version: str = "V01.30 ",
         faults: Faults | None = None,
         pace: bool = True,
+        realtime_index: bool = False,
         seed: int = 0,
     ) -> None:
         if units not in ("cm", "mm"):
@@ -197,6 +218,7 @@ class VirtualLMS:
         self.world = world
         self.rate = rate
         self.pace = pace
+        self.realtime_index = realtime_index
         self.type_string = type_string
         self.software_version = software_version
         self.prom_version = prom_version
@@ -219,6 +241,7 @@ class VirtualLMS:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._t0 = time.monotonic()
+        self._epoch0 = time.time()
         self._parser = StreamParser("request", address=0)
         self._lock = threading.Lock()  # guards the counters read by state()
         self._reset_state()
@@ -246,6 +269,7 @@ class VirtualLMS:
             self._link = self._own_dir / "lms0"
         self._wake_r, self._wake_w = os.pipe()
         self._t0 = time.monotonic()
+        self._epoch0 = time.time()
         # the first ray cast loads (or compiles) the numba caster, 0.3 s or more: pay it now,
         # not as a silent gap before the first scan (a real scanner streams at once)
         self._scan_telegram(self._t0)
@@ -278,6 +302,10 @@ class VirtualLMS:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+    def epoch(self, t: float) -> float:
+        """Seconds since the scanner started (what :class:`RangeSource` is given) as epoch seconds."""
+        return self._epoch0 + t
 
     @property
     def pts(self) -> str | None:
@@ -351,6 +379,7 @@ class VirtualLMS:
         self._res = res
         self._next_scan = time.monotonic()
         self._line_free = 0.0
+        self._scan_no = 0  # scans measured since power-up (the real-time index counts their turns)
 
     def _plug(self) -> None:
         if self._master is not None:
@@ -572,7 +601,10 @@ class VirtualLMS:
 
     def _config(self) -> tg.ScannerConfig:
         return replace(
-            tg.ScannerConfig(), units=self._units, measuring_mode=MeasuringMode.R8_80_FIELDS_AB_DAZZLE
+            tg.ScannerConfig(),
+            units=self._units,
+            measuring_mode=MeasuringMode.R8_80_FIELDS_AB_DAZZLE,
+            availability=AVAILABILITY_REALTIME_INDEX if self.realtime_index else 0,
         )
 
     def _period(self) -> float:
@@ -580,26 +612,54 @@ class VirtualLMS:
             return 1.0 / self.rate
         return tg.scan_period_s(self._angle, self._res)
 
-    def _scan_telegram(self, now: float) -> Telegram:
+    def _line_and_sweep(self) -> float:
+        """Seconds from the start of a scan's sweep to the last byte of its telegram: the
+        sweep (the turns of an interlaced scan) and the telegram's line time."""
+        turns = tg.scan_revolutions(self._angle, self._res)
+        return (turns - 1 + self._angle / 360.0) / MIRROR_HZ + self._telegram_time()
+
+    def _scan_telegram(self, measured: float) -> Telegram:
+        """A 0xB0 telegram of the scan whose sweep started at ``measured`` (monotonic seconds)."""
         n = tg.n_values(self._angle, self._res)
         fov = math.radians(self._angle)
         max_range = tg.range_max_m(self._units)
-        ranges = self.world.ranges(now - self._t0, n_beams=n, fov=fov, max_range=max_range)
+        ranges = self.world.ranges(measured - self._t0, n_beams=n, fov=fov, max_range=max_range)
         ranges = np.where(ranges >= max_range, np.inf, ranges)  # nothing within range: "> maximum"
         values = tg.ranges_to_values(ranges, self._units)
-        return tg.MeasuredValues(values, units=self._units).telegram()
+        index = None
+        if self.realtime_index:
+            index = (self._scan_no * tg.scan_revolutions(self._angle, self._res)) & 0xFF
+        self._scan_no += 1
+        return tg.MeasuredValues(values, units=self._units, realtime_index=index).telegram()
 
     def _stream(self, now: float) -> None:
-        if now < self._next_scan:
-            return
+        """Send the scans whose time has come (see the class docstring)."""
         period = self._period()
-        late = now - self._next_scan
-        # a thread woken late catches up on its schedule; one starved for long starts afresh
-        self._next_scan = (now + period) if late > 3 * period else (self._next_scan + period)
-        if self.pace and now < self._line_free:
+        missed = (
+            int((now - self._next_scan - MAX_CATCH_UP) // period)
+            if now - self._next_scan > MAX_CATCH_UP
+            else 0
+        )
+        if missed > 0:  # starved for long: what is older than MAX_CATCH_UP is gone
+            self._next_scan += missed * period
+            self._scan_no += missed
             with self._lock:
-                self._scans_skipped += 1
-            return
-        self._send_telegram(self._scan_telegram(now))
-        with self._lock:
-            self._scans_sent += 1
+                self._scans_skipped += missed
+        lead = self._line_and_sweep()
+        while self._next_scan <= now:
+            due = self._next_scan
+            self._next_scan += period
+            if self.pace and due - self._telegram_time() < self._line_free:
+                self._scan_no += 1  # the line still carries the last scan: this one is skipped
+                with self._lock:
+                    self._scans_skipped += 1
+                continue
+            self._send_telegram(self._scan_telegram(due - lead))
+            self._line_free = due  # the telegram's last byte leaves at its due time
+            with self._lock:
+                self._scans_sent += 1
+
+    def _telegram_time(self) -> float:
+        """Seconds a scan's 0xB0 telegram takes on the line (10 bits per byte)."""
+        n = tg.n_values(self._angle, self._res)
+        return (10 + 2 * n + (1 if self.realtime_index else 0)) * 10.0 / self._baud

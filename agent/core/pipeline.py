@@ -767,6 +767,12 @@ def _tracking_from(table: Mapping[str, Any]) -> TrackingParams:
     t.setdefault("prior_rotation", 0.0)
     # ... and one without the field's kind before the incremental field: the window, remade
     t.setdefault("field", "window")
+    # ... and one without these before the fallback rule and the probation of corrections:
+    # the fallback on any poor fit, corrections never questioned
+    t.setdefault("fallback", "poor_fit")
+    t.setdefault("confirm_scans", 0)
+    if "noise_floor" in t:
+        t["noise_floor"] = tuple(t["noise_floor"])
     match = build_dataclass(MatchParams, t.pop("match", {}), "localization.match")
     return replace(build_dataclass(TrackingParams, t, "localization", skip=("match",)), match=match)
 

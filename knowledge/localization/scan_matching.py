@@ -397,6 +397,15 @@ class ScanMatcher:
         a = abs(math.atan2(math.sin(pose[2] - start[2]), math.cos(pose[2] - start[2])))
         return d <= prm.linear_window + max(prm.sigmas) and a <= prm.angular_window + 0.1
 
+    def fit(self, mf: MatchField, points: np.ndarray, pose: npt.ArrayLike) -> float:
+        """The mean narrow-``σ`` score of the scan ``points`` at ``pose`` (the field's map frame)."""
+        p = np.asarray(pose, dtype=np.float64)
+        pts = np.ascontiguousarray(points, dtype=np.float64)
+        if pts.shape[0] == 0:
+            return 0.0
+        _, _, fit = _gn_system(mf.scores[-1], pts, float(p[0]), float(p[1]), float(p[2]), mf.resolution)
+        return float(fit)
+
     def _stay(
         self, mf: MatchField, pts: np.ndarray, start: np.ndarray
     ) -> tuple[np.ndarray, float, np.ndarray]:

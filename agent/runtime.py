@@ -230,6 +230,9 @@ class Agent:
         self._process_ms: deque[float] = deque(maxlen=1000)
         self._tracking_errors = 0  # the pipeline's tracking_errors already logged
         self._age_ms: deque[float] = deque(maxlen=1000)
+        self._last_confidence: str | None = None  # the localization state last published
+        #: scans per localization state and tracker events ([localization])
+        self._localization_counts: dict[str, int] = {}
         #: kernels compiled after the warm-up (a path it missed): counted and logged
         self._compiles = CompileWatch()
         self.compiled: list[str] = []
@@ -338,6 +341,8 @@ class Agent:
             "objects",
             "map/edit",
             "tf/map",
+            "localization/pose",
+            "localization/status",
         ):
             self._pubs[stream] = publish_stream(session, self.robot, stream, stats=self.stats)
         if self.config.laser.source == "lms":
@@ -615,6 +620,7 @@ class Agent:
             c = result.correction
             m2o = Pose2D(float(c[0]), float(c[1]), float(c[2]), stamp=result.stamp, frame_id="map")
             self._pubs["tf/map"].put(frame_transform(m2o, "odom"))
+            self._publish_localization(result)
         assert self.pipeline is not None
         self._pubs["scan/full"].put(full_scan_message(result, self.pipeline.params.rear_beams.max_range))
         if result.people is not None:
@@ -639,6 +645,55 @@ class Agent:
             p = result.pose
             for out in self.dialogue.on_scan(result.scan, (p.x, p.y, p.theta), result.people):
                 self._send(out)
+
+    def _publish_localization(self, result: StepResult) -> None:
+        """``localization/pose`` every scan (the corrected pose, its covariance from the
+        tracker's confidence) and ``localization/status`` when the confidence's state changes
+        or the tracker reports an event (a correction, one undone); the dialogue hears it."""
+        conf = result.localization
+        if conf is None:
+            return
+        p, c = result.pose, result.correction
+        assert c is not None
+        s_t, s_r = conf.sigma
+        self._pubs["localization/pose"].put(
+            {
+                "schema": "loci.pose/1",
+                "stamp": result.stamp,
+                "frame_id": "map",
+                "x": p.x,
+                "y": p.y,
+                "theta": p.theta,
+                "covariance": [s_t * s_t, 0.0, 0.0, 0.0, s_t * s_t, 0.0, 0.0, 0.0, s_r * s_r],
+                "mode": "tracking",
+                "map_to_odom": {"x": float(c[0]), "y": float(c[1]), "theta": float(c[2])},
+            }
+        )
+        counts = self._localization_counts
+        counts[conf.state] = counts.get(conf.state, 0) + 1
+        if conf.event is not None:
+            counts[conf.event] = counts.get(conf.event, 0) + 1
+        if conf.event is None and self._last_confidence == conf.state:
+            return
+        if conf.state != self._last_confidence:
+            log.log(
+                logging.INFO if conf.certain else logging.WARNING,
+                "localization: %s (the pose may be %.2f m off)%s",
+                conf.state,
+                s_t,
+                f"; {conf.event} of {conf.deviation[0]:.2f} m" if conf.event else "",
+            )
+        self._last_confidence = conf.state
+        self._pubs["localization/status"].put(
+            {
+                "schema": "loci.localization/1",
+                "stamp": result.stamp,
+                **conf.as_dict(),
+                "pose": {"x": p.x, "y": p.y, "theta": p.theta},
+            }
+        )
+        if self.dialogue is not None:
+            self.dialogue.on_localization(conf)
 
     def _publish_state(self, stamp: float, *, force: bool = False) -> None:
         """Publish the graph and areas (messages and scenes) if they changed since the last time."""
@@ -872,6 +927,7 @@ class Agent:
                 "lag": pipeline.params.tracking_lag,
                 "waits": pipeline.tracking_waits,
                 "errors": pipeline.tracking_errors,
+                "confidence": dict(self._localization_counts),
             }
         }
 

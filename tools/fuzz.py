@@ -147,6 +147,18 @@ SAMPLES: dict[str, dict[str, Any]] = {
         "mode": "tracking",
         "map_to_odom": {"x": 0.1, "y": -0.2, "theta": 0.01},
     },
+    "loci.localization/1": {
+        "schema": "loci.localization/1",
+        "stamp": _NOW,
+        "state": "uncertain",
+        "sigma": 0.31,
+        "sigma_theta": 0.05,
+        "fit": 0.74,
+        "event": "correction",
+        "deviation": 0.3,
+        "deviation_theta": 0.0,
+        "pose": {"x": 1.0, "y": 2.0, "theta": 0.5},
+    },
 }
 
 

@@ -174,6 +174,13 @@ STREAMS: dict[str, StreamSpec] = {
             "the robot's pose in the map with its covariance",
         ),
         StreamSpec(
+            "localization/status",
+            "loci.localization/1",
+            "agent → all",
+            Policy.WAIT,
+            "how sure the tracked pose is: its state and σ, when they change or a correction happens",
+        ),
+        StreamSpec(
             "localization/scene",
             "foxglove.SceneUpdate",
             "agent → all",

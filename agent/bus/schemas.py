@@ -618,4 +618,34 @@ LOCALIZED_POSE = MessageSchema(
     description="the robot's pose in a known map with its covariance (loci localize, [localization])",
 )
 
-SCHEMAS.register(LOCALIZED_POSE)
+LOCALIZATION = MessageSchema(
+    "loci.localization",
+    1,
+    obj(
+        {
+            "stamp": _STAMP,
+            "state": string(choices=("tracking", "uncertain", "lost"), description="how sure the pose is"),
+            "sigma": number(minimum=0, description="metres the pose may be off (one standard deviation)"),
+            "sigma_theta": number(minimum=0, description="radians the heading may be off"),
+        },
+        {
+            "fit": number(minimum=0, maximum=1, description="the scan's match fit"),
+            "event": string(
+                nullable=True,
+                max_length=32,
+                description="'correction' (larger than the odometry allows), 'reverted' (one undone), "
+                "'stall', 'resumed' (the odometry stood still, moved again)",
+            ),
+            "deviation": number(
+                minimum=0, description="metres the pose moved from the odometry's prediction"
+            ),
+            "deviation_theta": number(minimum=0, description="radians likewise"),
+            "pose": obj(_POSE, description="the corrected pose of the laser (map frame)"),
+        },
+    ),
+    description="the pose tracker's confidence, when it changes or something happens ([localization])",
+    max_bytes=SMALL_MESSAGE_BYTES,
+)
+
+for _schema in (LOCALIZED_POSE, LOCALIZATION):
+    SCHEMAS.register(_schema)

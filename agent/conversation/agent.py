@@ -200,6 +200,8 @@ class DialogueAgent:
         self._commit = commit
         self.clock = clock
         self.pose: tuple[float, float, float] | None = None
+        #: how sure the tracked pose is ([localization]; None: tracking off, the odometry is trusted)
+        self.confidence: Any = None
         self.tasks: dict[str, _Task] = {}  # base goal id -> task
         self.questions: dict[str, _Question] = {}
         self.confirmed: set[int] = set()  # doorways the tutor confirmed
@@ -443,7 +445,15 @@ class DialogueAgent:
     async def _on_ask_place(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:
         snap = await self._reasoned_snapshot()
         area = self.area_view(self.current_area(), snap)
-        return [self.say(intent, "ask_place", "ok", {"area": area})]
+        return [self.say(intent, "ask_place", "ok", {"area": area, **self._certainty()})]
+
+    def _certainty(self) -> dict[str, Any]:
+        """``{"certain": False, "sigma": metres}`` while the tracked pose is not sure ({} else):
+        the answer then says "I think ..." (knowledge.conceptual.referring.answer_text)."""
+        conf = self.confidence
+        if conf is None or getattr(conf, "certain", True):
+            return {}
+        return {"certain": False, "sigma": round(float(conf.sigma[0]), 2), "localization": conf.state}
 
     async def _reasoned_snapshot(self) -> dict[str, Any]:
         """The concepts snapshot, after the reasoning that is due if one is (at most
@@ -742,6 +752,9 @@ class DialogueAgent:
         task = self.tasks.pop(goal)
         content = {"target": task.target, "reached": state == "reached", "node": task.node}
         if state == "reached":
+            # the base reached the goal it was given in its odometry frame; whether that is the
+            # target depends on the tracked pose: when it is not sure, the robot says so
+            content.update(self._certainty())
             return [self.say(None, task.kind, "ok", content, task=task.intent)]
         reason = status.get("reason") or f"the base says {state}"
         text = f"I could not get to {describe_target(task.target)}: {reason}."
@@ -749,6 +762,10 @@ class DialogueAgent:
 
     def on_pose(self, pose: tuple[float, float, float]) -> None:
         self.pose = pose
+
+    def on_localization(self, confidence: Any) -> None:
+        """How sure the tracked pose is now (a :class:`~knowledge.localization.confidence.Confidence`)."""
+        self.confidence = confidence
 
     def on_scan(self, scan: Any, pose: tuple[float, float, float], people: Any = None) -> list[Outgoing]:
         """One processed scan, the laser's odometry pose and the scan's people (a

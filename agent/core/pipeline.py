@@ -74,6 +74,7 @@ import numpy as np
 from agent.tables import build_dataclass, dataclass_table
 from drivers.messages import LaserScan, Pose2D
 from knowledge.learning.hmm import HMMFilter
+from knowledge.localization.confidence import Confidence, ConfidenceTracker
 from knowledge.localization.scan_matching import MatchParams
 from knowledge.localization.se2 import compose as se2_compose
 from knowledge.localization.se2 import inverse as se2_inverse
@@ -325,6 +326,9 @@ class StepResult:
             ``pose`` is then in the odometry frame, else in ``map``).
         raw_probabilities: class → probability, the model's histogram of this scan (eq. 4.5).
         filtered: class → probability, the HMM's belief after this scan (None: no HMM).
+        localization: how sure the corrected pose is (``[localization]``; None: tracking off,
+            or no scan matched yet): the tracker's verdict on scan ``k − L`` with a lag
+            (:class:`~knowledge.localization.confidence.Confidence`).
     """
 
     scan: LaserScan
@@ -342,6 +346,7 @@ class StepResult:
     correction: np.ndarray | None = None
     raw_probabilities: Mapping[str, float] = field(default_factory=dict)
     filtered: Mapping[str, float] | None = None
+    localization: Confidence | None = None
 
     @property
     def raw_label(self) -> str:
@@ -433,6 +438,7 @@ class Pipeline:
         self._angles: tuple[tuple[int, float, float], np.ndarray] | None = None
         loc = self.params.localization
         self.tracker: PoseTracker | None = PoseTracker(loc) if loc is not None else None
+        self._confidence = ConfidenceTracker(loc.noise_floor if loc is not None else (0.03, 0.03))
         self._lag = self.params.tracking_lag if self.tracker is not None else 0
         self._track_pool: ThreadPoolExecutor | None = None
         self._track_jobs: deque[Future[TrackStep]] = deque()
@@ -499,7 +505,9 @@ class Pipeline:
             if not job.done():
                 self.tracking_waits += 1
             try:
-                self._correction = job.result().correction
+                done = job.result()
+                self._correction = done.correction
+                self._confidence.update(done)
             except Exception as exc:  # that scan's match is lost, not this scan
                 self.tracking_errors += 1
                 self.last_tracking_error = f"{type(exc).__name__}: {exc}"
@@ -518,6 +526,7 @@ class Pipeline:
         if self._lag == 0:
             step = self._timed_track(ranges, angles, sensor, scan)
             self._correction = step.correction
+            self._confidence.update(step)
             applied = self._smoothed(step.correction, sensor, scan.stamp)
             if self.params.tracking_smoothing == 0.0:
                 return step.pose, step.correction
@@ -671,6 +680,7 @@ class Pipeline:
             masked=mask,
             coverage=coverage,
             correction=correction,
+            localization=self._confidence.current if self.tracker is not None else None,
             raw_probabilities={c: float(p) for c, p in zip(self.classes, proba, strict=True)},
             filtered=None
             if belief is None

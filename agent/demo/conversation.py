@@ -33,7 +33,8 @@ T = TypeVar("T")
 
 @dataclass
 class Event:
-    """One thing said or heard: ``kind`` is ``tutor``, ``intent``, ``say`` or ``ask``;
+    """One thing said or heard: ``kind`` is ``tutor``, ``intent``, ``say`` or ``ask``, or
+    ``localization`` (the agent's confidence in its pose changed: ``loci.localization/1``);
     ``t`` seconds since the conversation started."""
 
     kind: str
@@ -48,6 +49,16 @@ class _Latest:
     tutor: dict[str, Any] | None = None
     truth_count: int = 0
     path: list[tuple[float, float]] = field(default_factory=list)
+
+
+def _localization_text(msg: dict[str, Any], before: str | None) -> str:
+    """A line for the screen when the confidence changes state (events within a state are not shown)."""
+    state = msg.get("state")
+    if state == before:
+        return ""
+    if state == "tracking":
+        return "(localization: I know where I am again)" if before is not None else ""
+    return f"(localization: {state}, the pose may be {float(msg.get('sigma') or 0.0):.2f} m off)"
 
 
 class Conversation:
@@ -86,13 +97,14 @@ class Conversation:
             subscribe_stream(session, robot, "dialogue/say"),
             subscribe_stream(session, robot, "dialogue/ask"),
             subscribe_stream(session, robot, "sim/truth", capacity=8),
+            subscribe_stream(session, robot, "localization/status"),
         ]
         self._tasks: list[asyncio.Task[None]] = []
         self._loop = asyncio.get_running_loop()
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
-        kinds = ("intent", "say", "ask", "truth")
+        kinds = ("intent", "say", "ask", "truth", "localization")
         self._tasks = [asyncio.create_task(self._pump(s, k)) for s, k in zip(self._subs, kinds, strict=True)]
 
     async def close(self) -> None:
@@ -132,14 +144,33 @@ class Conversation:
                         p = self.latest.path
                         if not p or abs(p[-1][0] - xy[0]) + abs(p[-1][1] - xy[1]) > 0.05:
                             p.append(xy)
+                    elif kind == "localization":
+                        before = next(
+                            (e.message.get("state") for e in reversed(self.events) if e.kind == kind), None
+                        )
+                        self._add(Event(kind, self.elapsed(), msg, _localization_text(msg, before)))
                     else:
                         self._add(Event(kind, self.elapsed(), msg, str(msg.get("text", ""))))
                 self._changed.set()
 
     def _add(self, event: Event) -> None:
         self.events.append(event)
-        if self.echo is not None and event.kind != "intent":
+        if self.echo is not None and event.kind != "intent" and event.text:
             self.echo(event)
+
+    def localization(self) -> list[dict[str, Any]]:
+        """The agent's localization reports so far: ``t``, state, σ and event of each."""
+        return [
+            {
+                "t": round(e.t, 2),
+                "state": e.message.get("state"),
+                "sigma": e.message.get("sigma"),
+                "event": e.message.get("event"),
+                "deviation": e.message.get("deviation"),
+            }
+            for e in self.events
+            if e.kind == "localization"
+        ]
 
     # ------------------------------------------------------------------ output
     async def wait_listener(self, timeout: float) -> bool:

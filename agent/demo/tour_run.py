@@ -153,6 +153,8 @@ def _fmt_event(e: Event) -> str:
         return f"[{e.t:6.1f}s] tutor: {e.text}"
     if e.kind == "ask":
         return f"[{e.t:6.1f}s] robot asks: {e.text}"
+    if e.kind == "localization":
+        return f"[{e.t:6.1f}s] robot {e.text}"
     status = e.message.get("status")
     mark = " (refused)" if status == "error" else ""
     return f"[{e.t:6.1f}s] robot: {e.text}{mark}"
@@ -306,7 +308,12 @@ async def _play(
             with contextlib.suppress(asyncio.CancelledError):
                 await progress
             await conv.close()
-    return {"_steps": steps, "final": final, "conversation": [_event_dict(e) for e in conv.events]}
+    return {
+        "_steps": steps,
+        "final": final,
+        "conversation": [_event_dict(e) for e in conv.events if e.kind != "localization"],
+        "localization": conv.localization(),
+    }
 
 
 def _event_dict(e: Event) -> dict[str, Any]:

@@ -193,10 +193,12 @@ def answer_text(intent: str, content: Mapping[str, Any]) -> str:
     Returns "" when the content does not carry what that kind's answer needs (the caller then
     uses the agent's own ``text``). Kinds and the content they read:
 
-    - ``ask_place``: ``{"area"}`` → "I am in the living room."
+    - ``ask_place``: ``{"area"}`` → "I am in the living room."; with ``"certain": false`` (the
+      tracked pose is not sure) → "I think I am in the living room, but I am not sure where I am."
     - ``ask_where``: ``{"target", "area", "node"}`` → "The television is in the living room."
     - ``go_to``: ``{"target", "distance"}`` → "I am going to the kitchen, 12 metres away.";
-      ``{"reached": true}`` → "I have reached the kitchen."
+      ``{"reached": true}`` → "I have reached the kitchen." (``"certain": false``: "I think I
+      have reached the kitchen, but I am not sure where I am.")
     - ``look_around``: ``{"objects", "area"}`` → "I see a television and a couch. I am in ...".
     - ``assert_type``/``assert_name``/``assert_object``: ``{"area"}`` (and ``"object"``) →
       "Thank you. Now I know this is the kitchen."
@@ -209,9 +211,12 @@ def answer_text(intent: str, content: Mapping[str, Any]) -> str:
     area = content.get("area")
     if area is not None and not isinstance(area, Mapping):
         return ""  # malformed: the caller says the agent's text instead
+    unsure = content.get("certain") is False
     if intent == "ask_place":
         if area is None:
             return "I do not know where I am." if "area" in content else ""
+        if unsure:
+            return _sentence(f"I think I am in {describe_area(area)}, but I am not sure where I am")
         return _sentence(f"I am in {describe_area(area)}")
     if intent == "ask_where":
         if "target" not in content and area is None:
@@ -228,6 +233,12 @@ def answer_text(intent: str, content: Mapping[str, Any]) -> str:
     if intent == "go_to":
         goal = describe_target(content.get("target")) if "target" in content else None
         if content.get("reached") is True:
+            if unsure:
+                return _sentence(
+                    f"I think I have reached {goal}, but I am not sure where I am"
+                    if goal
+                    else "I think I am there, but I am not sure where I am"
+                )
             return _sentence(f"I have reached {goal}" if goal else "I am there")
         if "reached" in content or goal is None:  # a failure report: the agent's text says why
             return ""

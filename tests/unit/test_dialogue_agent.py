@@ -410,3 +410,30 @@ def test_where_are_you_waits_for_a_reasoning_that_is_due(
     assert concepts.flushed == 1
     types = reply["content"]["area"]["types"]
     assert types == (["LivingRoom", "Room"] if delay == 0.0 else [])
+
+
+def test_a_robot_not_sure_of_its_pose_says_so_when_it_arrives_and_where_it_is() -> None:
+    """Issue 24: the robot said "I have reached the charging station" 0.93 m away because its own
+    pose said so; while the tracked pose is uncertain it says "I think ..." instead."""
+    from knowledge.localization.confidence import Confidence
+
+    world, corridor, _, room = office()
+    agent, _ = agent_for(world)
+    world.graph.current = corridor[0]
+    handle(agent, intent("assert_object", object="charging station"))
+    world.graph.current = room[3]
+    agent.on_pose((6.0, 3.0, 0.0))
+    agent.on_localization(Confidence("uncertain", (0.45, 0.05), 0.6, "correction", (0.4, 0.0)))
+    _, rest = handle(agent, intent("go_to", target={"head": "charging station", "determiner": "the"}))
+    (goal,) = [o.message for o in rest if o.stream == "base/goal"]
+    (report,) = agent.on_base_status({"status": "reached", "goal": goal["id"]})
+    SCHEMAS.validate(report.message)
+    content = report.message["content"]
+    assert content["reached"] is True and content["certain"] is False and content["sigma"] == 0.45
+    assert report.message["text"].startswith("I think I have reached the charging station")
+    where, _ = handle(agent, intent("ask_place"))
+    assert where["content"]["certain"] is False and where["text"].startswith("I think I am in")
+    # sure again: plain answers, no "certain" key
+    agent.on_localization(Confidence("tracking", (0.03, 0.03), 0.9))
+    where, _ = handle(agent, intent("ask_place"))
+    assert "certain" not in where["content"] and where["text"].startswith("I am in")

@@ -61,6 +61,7 @@ def test_tracking_in_the_pipeline_corrects_drifting_odometry() -> None:
     on = Pipeline(model, PipelineParams(localization=TrackingParams(), people=_no_people()))
     off = Pipeline(model, PipelineParams(people=_no_people()))
     got_on, got_off = [], []
+    states: list[str] = []
     for i in range(len(truth)):
         scan = LaserScan(
             float(i), i, "laser", float(ANGLES[0]), float(ANGLES[1] - ANGLES[0]), RANGE_MAX, R[i]
@@ -70,10 +71,13 @@ def test_tracking_in_the_pipeline_corrects_drifting_odometry() -> None:
         got_on.append((a.pose.x, a.pose.y, a.pose.theta))
         got_off.append((b.pose.x, b.pose.y, b.pose.theta))
         assert a.pose.frame_id == "map" and a.correction is not None
-        assert b.pose.frame_id == "odom" and b.correction is None
+        assert b.pose.frame_id == "odom" and b.correction is None and b.localization is None
+        assert a.localization is not None  # how sure the pose is, after every scan
+        states.append(a.localization.state)
     err_on = np.hypot(*(np.array(got_on)[:, :2] - truth[:, :2]).T)
     err_off = np.hypot(*(np.array(got_off)[:, :2] - truth[:, :2]).T)
     assert err_off.max() > 2.0 and err_on.max() < 0.25
+    assert states.count("tracking") > 0.9 * len(states) and "lost" not in states
     assert ate(truth, np.array(got_on))[0].rmse < 0.1 < ate(truth, np.array(got_off))[0].rmse
     # the graph lives in the corrected frame and says so
     assert on.messages()[0]["frame_id"] == "map" and off.messages()[0]["frame_id"] == "odom"

@@ -87,6 +87,7 @@ from agent.bus.codecs import (
 from agent.bus.diagnostics import diagnostics_message, publish_diagnostics
 from agent.bus.keys import Policy, RobotKeys, robot_wildcard
 from agent.bus.queryable import StateCell, StateQueryable
+from agent.bus.ready import declare_ready
 from agent.bus.scene import areas_scene, graph_scene, people_scene
 from agent.bus.session import close_session, listening_endpoints, open_session
 from agent.config import AgentConfig
@@ -230,6 +231,7 @@ class Agent:
         self._process_ms: deque[float] = deque(maxlen=1000)
         self._tracking_errors = 0  # the pipeline's tracking_errors already logged
         self._age_ms: deque[float] = deque(maxlen=1000)
+        self._ready: Any = None  # the liveliness token loci/<robot>/ready/agent, once ready
         self._last_confidence: str | None = None  # the localization state last published
         #: scans per localization state and tracker events ([localization])
         self._localization_counts: dict[str, int] = {}
@@ -591,6 +593,10 @@ class Agent:
                 continue
             self._last_processed_stamp = m.scan.stamp
             self._process_ms.append((time.perf_counter() - t0) * 1e3)
+            if self._ready is None and self.session is not None:
+                # the map and the models are loaded, the kernels compiled, a scan went through
+                self._ready = declare_ready(self.session, self.robot, "agent")
+                log.info("ready: the first scan is processed (%s)", self.keys.ready("agent"))
             if pipeline.tracking_errors > self._tracking_errors:  # on the tracker's thread
                 self._tracking_errors = pipeline.tracking_errors
                 self._ratelog(
@@ -1007,6 +1013,10 @@ class Agent:
             if sink is not None:
                 sink.close()
                 self.report.recorded = sink.messages
+            if self._ready is not None:
+                with contextlib.suppress(Exception):
+                    self._ready.undeclare()
+                self._ready = None
             for q in queryables:
                 q.close()
             for pub in self._pubs.values():

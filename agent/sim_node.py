@@ -30,6 +30,7 @@ log = logging.getLogger(__name__)
 
 async def run_robot(robot: SimRobot, name: str, bus: Any, duration: float | None, tutor: Any = None) -> int:
     from agent.bus.bridge import BusClosed, subscribe_stream
+    from agent.bus.ready import declare_ready
     from agent.bus.session import bus_session
 
     loop = asyncio.get_running_loop()
@@ -62,6 +63,7 @@ async def run_robot(robot: SimRobot, name: str, bus: Any, duration: float | None
                 tasks.append(asyncio.create_task(_serve_tutor(session, name, tutor)))
             try:
                 path = robot.start()
+                ready = declare_ready(session, name, "sim")  # the base runs, the laser streams
                 print(path if path is not None else "-", flush=True)
                 print(name, flush=True)
                 c = robot.config
@@ -79,6 +81,8 @@ async def run_robot(robot: SimRobot, name: str, bus: Any, duration: float | None
                 with contextlib.suppress(TimeoutError):
                     await asyncio.wait_for(stop.wait(), duration)
             finally:
+                with contextlib.suppress(Exception):
+                    ready.undeclare()
                 robot.stop()
                 cmds.close()
                 goals.close()

@@ -251,6 +251,18 @@ def state_key(robot: str, name: str) -> str:
     return stream_key(robot, f"state/{name}")
 
 
+#: The processes of a robot that say they are ready (liveliness tokens ``loci/<robot>/ready/<role>``).
+READY_ROLES = ("agent", "sim", "dialogue")
+
+
+def ready_key(robot: str, role: str) -> str:
+    """The liveliness token a process of ``robot`` declares when it is ready to work:
+    ``loci/<robot>/ready/<role>`` (``role`` one of :data:`READY_ROLES`, or ``*``)."""
+    if role != "*" and role not in READY_ROLES:
+        raise ValueError(f"role must be one of {READY_ROLES} (or '*'), got {role!r}")
+    return f"{PREFIX}/{robot_name(robot)}/ready/{role}"
+
+
 def robot_wildcard(robot: str) -> str:
     """``loci/<robot>/**``: every stream and queryable of one robot (what a recorder subscribes)."""
     return f"{PREFIX}/{robot_name(robot)}/**"
@@ -270,6 +282,9 @@ class RobotKeys:
 
     def state(self, name: str) -> str:
         return state_key(self.robot, name)
+
+    def ready(self, role: str) -> str:
+        return ready_key(self.robot, role)
 
     @property
     def all(self) -> str:

@@ -265,6 +265,8 @@ async def _play(
     ps: int,
     timings: dict[str, float],
 ) -> dict[str, Any]:
+    from agent.bus.keys import READY_ROLES
+    from agent.bus.ready import wait_ready
     from agent.bus.session import BusConfig, bus_session
 
     t0 = time.monotonic()
@@ -276,9 +278,12 @@ async def _play(
         progress = asyncio.create_task(_progress(conv, screen, current, children))
         try:
             screen.status("starting the simulator, the agent (place model, reasoner) and the dialogue ...")
-            ready = await conv.wait_until_async(_agent_ready, opts.startup_timeout, period=0.5)
-            if children.dead() is not None or not ready:
-                raise _failed(children, "the agent did not come up")
+            # every process says when it is ready (a liveliness token, agent/bus/ready.py): the
+            # agent once its kernels are compiled and its first scan processed
+            ready = await wait_ready(session, ROBOT, READY_ROLES, opts.startup_timeout)
+            missing = [r for r in READY_ROLES if r not in ready]
+            if children.dead() is not None or missing:
+                raise _failed(children, f"the {' and the '.join(missing) or 'processes'} did not come up")
             if not await conv.wait_listener(opts.startup_timeout):
                 raise _failed(children, "the dialogue process did not come up")
             timings["startup"] = time.monotonic() - t0
@@ -318,11 +323,6 @@ async def _play(
 
 def _event_dict(e: Event) -> dict[str, Any]:
     return {"t": round(e.t, 2), "kind": e.kind, "text": e.text, "id": e.message.get("id")}
-
-
-async def _agent_ready(conv: Conversation) -> bool:
-    graph = await conv.aquery("graph", 1.0)
-    return bool(graph and graph.get("nodes"))
 
 
 async def _progress(

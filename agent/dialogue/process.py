@@ -42,6 +42,7 @@ import zenoh
 
 from agent.bus.bridge import BusStats, Publisher, Subscription, publish_stream, subscribe_stream
 from agent.bus.keys import robot_name, stream_key
+from agent.bus.ready import declare_ready
 from agent.bus.session import BusConfig
 from agent.dialogue.grammar import NotUnderstood, parse
 from agent.dialogue.speech import Speech
@@ -609,6 +610,7 @@ async def run_dialogue(
                 out=out,
             )
             async with dialogue:
+                ready = declare_ready(session, dialogue.robot, "dialogue")  # listening now
                 if not await dialogue.wait_for_agent(config.connect_wait):
                     print(
                         f"(no agent listens for intents of robot {dialogue.robot!r} at "
@@ -637,6 +639,8 @@ async def run_dialogue(
                 if not stop.is_set():
                     await dialogue.settle(config.reply_timeout)
                 counts = dialogue.counts()
+                with contextlib.suppress(Exception):
+                    ready.undeclare()
     finally:
         for sig in signals:
             loop.remove_signal_handler(sig)

@@ -29,6 +29,7 @@ from support.runtime import ROBOT, AgentProcess, _room_scan, write_config
 from agent.bus.bridge import publish_stream
 from agent.bus.codecs import POSE_CODEC
 from agent.bus.queryable import query_state
+from agent.bus.ready import ready_roles
 from agent.bus.schemas import SCHEMAS
 from agent.bus.session import BusConfig, bus_session, listening_endpoints
 from agent.bus.testing import settle, wait_until
@@ -184,10 +185,13 @@ def test_live_run_publishes_answers_records_and_replays_to_the_same_map(
             replies = {
                 r.key.rsplit("/", 1)[-1]: r for r in query_state(session, f"loci/{ROBOT}/state/**", 3.0)
             }
+            ready_while_running = ready_roles(session, ROBOT)
             rc = agent.stop()
         finally:
             agent.kill()
     assert rc == 0, "".join(agent.lines)
+    # the agent said it was ready (its first scan processed), and is no more once stopped
+    assert ready_while_running == {"agent"} and ready_roles(session, ROBOT) == set()
     summary = agent.summary()
     # every scan the agent got was processed: nothing dropped anywhere
     assert summary["dropped"] == 0 and summary["errors"] == 0, summary

@@ -124,14 +124,23 @@ class Mount:
         return (self.x, self.y, math.radians(self.yaw))
 
 
+#: Where the agent's scans come from (``[laser] source``).
+LASER_SOURCES = ("lms", "bus", "recording")
+
+
 @dataclass(frozen=True)
 class LaserConfig:
     """``[laser]``: where scans come from.
 
     Attributes:
         source: ``"lms"`` (a SICK LMS 2xx on ``port``, read by the agent, which publishes each
-            scan on ``loci/<robot>/scan``) or ``"bus"`` (subscribe ``loci/<robot>/scan``).
-            Default: ``"lms"`` when ``port`` is set, else ``"bus"``.
+            scan on ``loci/<robot>/scan``), ``"bus"`` (subscribe ``loci/<robot>/scan``) or
+            ``"recording"`` (the scans *and the odometry* of the MCAP file ``recording``, at
+            ``speed`` times recorded speed, through the live agent: published on the bus as
+            the robot's own, with their recorded arrival times, so the run gives what
+            ``loci replay`` gives, at any speed; the agent stops at the file's end).
+            Default: ``"lms"`` when ``port`` is set, else ``"recording"`` when ``recording``
+            is, else ``"bus"``.
         port: the scanner's serial device or pyserial URL (``/dev/ttyUSB0``,
             ``socket://host:4001``, the path ``loci sim lms`` prints).
         baud: session baud rate (9600, 19200, 38400, 500000); omitted: 500000 if the port
@@ -144,10 +153,16 @@ class LaserConfig:
             37.5 Hz by default; beyond, the oldest is dropped (counted ``driver``).
         timeout: seconds per request to the scanner.
         mount: the laser's pose on the robot.
+        recording: the MCAP file of ``source = "recording"``.
+        speed: how fast a recording plays (1: recorded speed).
+        duration: play only the first seconds of the recording (omitted: all of it).
     """
 
     source: str = field(default="", metadata={"env": "LOCI_LASER_SOURCE"})
     port: str | None = field(default=None, metadata={"env": "LOCI_LASER_PORT"})
+    recording: str | None = None
+    speed: float = 1.0
+    duration: float | None = None
     baud: int | None = None
     variant: str = "180/0.5"
     frame_id: str = "laser"
@@ -156,10 +171,21 @@ class LaserConfig:
     mount: Mount = field(default_factory=Mount)
 
     def __post_init__(self) -> None:
-        source = self.source or ("lms" if self.port else "bus")
+        source = self.source or ("lms" if self.port else "recording" if self.recording else "bus")
         object.__setattr__(self, "source", source)
-        if source not in ("lms", "bus"):
-            raise ValueError(f"source must be 'lms' (a scanner on 'port') or 'bus', got {source!r}")
+        if source not in LASER_SOURCES:
+            raise ValueError(
+                f"source must be 'lms' (a scanner on 'port'), 'bus' or 'recording' (a file on "
+                f"'recording'), got {source!r}"
+            )
+        if source == "recording" and not self.recording:
+            raise ValueError(
+                "source 'recording' needs 'recording', the MCAP file, e.g. recording = 'run.mcap'"
+            )
+        if not (math.isfinite(self.speed) and self.speed > 0):
+            raise ValueError(f"speed must be > 0 (1 = recorded speed), got {self.speed!r}")
+        if self.duration is not None and not (math.isfinite(self.duration) and self.duration > 0):
+            raise ValueError(f"duration must be > 0 seconds, got {self.duration!r}")
         if source == "lms" and not self.port:
             raise ValueError(
                 "source 'lms' needs 'port', the scanner's serial device, e.g. port = '/dev/ttyUSB0'"

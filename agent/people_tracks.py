@@ -199,10 +199,10 @@ def recording_scans(
     Raises:
         DataError: not an MCAP recording, or no scans of the robot.
     """
-    from agent.bus.codecs import LASER_SCAN_CODEC, POSE_CODEC, checked_decode
-    from agent.bus.keys import RobotKeys
-    from agent.core.odom_sync import DROP_REASONS, OdomSync, SyncParams
+    from agent.core.odom_sync import DROP_REASONS, SyncParams
     from agent.core.pipeline import PipelineParams, compose
+    from agent.core.sensor_loop import SensorLoop
+    from agent.recording.feed import RecordingFeed
     from agent.recording.importer import as_loci_recording
     from agent.recording.offline import (
         FOREIGN_REORDER,
@@ -210,56 +210,38 @@ def recording_scans(
         read_recording_metadata,
         recorded_sync_params,
     )
-    from agent.recording.replay import McapMessages
-    from knowledge.errors import ProtocolError
 
     p = as_loci_recording(Path(path))
     if not p.is_file():
         raise DataError(f"{p}: no such recording")
     meta = read_recording_metadata(p)
-    robot = robot or meta.get("robot")
-    if not robot:
-        topics = {m.topic for m in McapMessages(p)}
-        robots = sorted({t.split("/")[1] for t in topics if t.startswith("loci/") and t.endswith("/scan")})
-        if len(robots) != 1:
-            raise DataError(f"{p}: name the robot with --robot (scans of: {', '.join(robots) or 'none'})")
-        robot = robots[0]
-    keys = RobotKeys(robot)
+    feed = RecordingFeed(p, robot=robot, meta=meta)
     params = (
         PipelineParams.from_table(json.loads(meta["pipeline"])) if meta.get("pipeline") else PipelineParams()
     )
-    sync = OdomSync(recorded_sync_params(meta) or SyncParams(reorder=FOREIGN_REORDER))
     run.mount = tuple(float(v) for v in params.mount)  # type: ignore[assignment]
-    run.robot = robot
-    total = _message_count(p, keys.scan)
+    run.robot = feed.robot
+    total = _message_count(p, feed.keys.scan)
+    posed: list[tuple[Any, tuple[float, float, float]]] = []
 
-    def posed(matched: Iterable[Any]) -> Iterator[tuple[Any, tuple[float, float, float]]]:
-        for m in matched:
-            sensor = compose(m.pose, params.mount)
-            yield m.scan, (float(sensor[0]), float(sensor[1]), float(sensor[2]))
+    def step(m: Any) -> None:
+        sensor = compose(m.pose, params.mount)
+        posed.append((m.scan, (float(sensor[0]), float(sensor[1]), float(sensor[2]))))
 
-    for msg in McapMessages(p, topics={keys.scan, keys.odom}):
-        now = msg.log_time_ns * 1e-9
-        try:
-            if msg.topic == keys.odom:
-                run.odometry += 1
-                yield from posed(
-                    sync.add_odom(checked_decode(POSE_CODEC, msg.zenoh_encoding, msg.data, msg.topic), now)
-                )
-                continue
-            run.scans += 1
-            scan = checked_decode(LASER_SCAN_CODEC, msg.zenoh_encoding, msg.data, msg.topic)
-        except ProtocolError:
-            if msg.topic == keys.scan:
-                run.invalid += 1
-            continue
-        yield from posed(sync.add_scan(scan, now))
-        if progress is not None:
-            progress(run.scans, total)
-    yield from posed(sync.close())
-    if run.scans == 0:
-        raise DataError(f"{p}: no {keys.scan} messages")
-    stats = sync.stats.as_dict()
+    # the agent's own sensor loop, so the tracks see the scans and poses a replay does
+    loop = SensorLoop(recorded_sync_params(meta) or SyncParams(reorder=FOREIGN_REORDER), step)
+    for message in feed:
+        loop.feed(message)
+        yield from posed
+        posed.clear()
+        if progress is not None and message.kind == "scan":
+            progress(feed.scans, total)
+    loop.close()
+    yield from posed
+    run.scans, run.odometry, run.invalid = feed.scans, feed.odometry, feed.invalid_scans
+    if feed.scans == 0:
+        raise DataError(f"{p}: no {feed.keys.scan} messages")
+    stats = loop.sync.stats.as_dict()
     run.dropped = {r: int(stats.get(r, 0)) for r in DROP_REASONS if stats.get(r, 0)}
 
 

@@ -96,6 +96,7 @@ from agent.conversation.memory import MemoryConcepts
 from agent.conversation.task import run_dialogue
 from agent.core.odom_sync import Matched, OdomSync
 from agent.core.pipeline import Pipeline, PipelineParams, StepResult, place_message
+from agent.core.sensor_loop import SensorLoop
 from agent.core.warmup import CompileWatch, warm_up
 from agent.ratelog import RateLimitedLog
 from agent.recording.recorder import McapSink, Recorder, recording_metadata
@@ -206,7 +207,10 @@ class Agent:
         self.keys = RobotKeys(self.robot)
         self.stats = BusStats()
         self.params = PipelineParams.from_config(config)
-        self.sync = OdomSync(config.odometry.sync)
+        #: the one sensor loop (agent/core/sensor_loop.py): scans with their odometry, in stamp
+        #: order, through :meth:`_step`
+        self.loop = SensorLoop(OdomSync(config.odometry.sync), self._step, on_error=self._step_failed)
+        self.sync = self.loop.sync
         self.report = AgentReport(self.robot)
         self.restarts = Restarts()
         self._ratelog = RateLimitedLog(log)
@@ -232,6 +236,9 @@ class Agent:
         self._tracking_errors = 0  # the pipeline's tracking_errors already logged
         self._age_ms: deque[float] = deque(maxlen=1000)
         self._ready: Any = None  # the liveliness token loci/<robot>/ready/agent, once ready
+        #: the sensor loop's clock for timeouts: the host's, or a recording's (its last message)
+        self._clock: Callable[[], float] = time.time
+        self._feed_time = 0.0
         self._last_confidence: str | None = None  # the localization state last published
         #: scans per localization state and tracker events ([localization])
         self._localization_counts: dict[str, int] = {}
@@ -347,8 +354,10 @@ class Agent:
             "localization/status",
         ):
             self._pubs[stream] = publish_stream(session, self.robot, stream, stats=self.stats)
-        if self.config.laser.source == "lms":
+        if self.config.laser.source in ("lms", "recording"):
             self._pubs["scan"] = publish_stream(session, self.robot, "scan", stats=self.stats)
+        if self.config.laser.source == "recording":
+            self._pubs["odom"] = publish_stream(session, self.robot, "odom", stats=self.stats)
         if self.config.conceptual.on:
             self._cells["concepts"] = StateCell("loci.concepts/1")
         return [StateQueryable(session, self.keys.state(name), cell) for name, cell in self._cells.items()]
@@ -417,12 +426,15 @@ class Agent:
                 )
             queryables = self._declare(session)
             self._publish_state(pipeline.last_stamp or time.time(), force=True)
-            self._odom_sub = self._subscribe(session, "odom", POSE_CODEC)
-            self._spawn(tasks, "odometry", self._odometry_task)
+            if cfg.laser.source != "recording":  # a recording brings its own odometry
+                self._odom_sub = self._subscribe(session, "odom", POSE_CODEC)
+                self._spawn(tasks, "odometry", self._odometry_task)
             if cfg.laser.source == "lms":
                 if not await self._start_lms(stop):
                     return self.report
                 self._spawn(tasks, "laser", self._lms_task)
+            elif cfg.laser.source == "recording":
+                self._spawn(tasks, "laser", self._recording_task, restart=False)
             else:
                 self._scan_sub = self._subscribe(session, "scan", LASER_SCAN_CODEC)
                 self._spawn(tasks, "laser", self._scan_bus_task)
@@ -516,20 +528,20 @@ class Agent:
         if sub is None:
             return
         while (item := sub.try_recv()) is not None:
-            self._feed(self.sync.add_odom(item[1], item[0]))
+            self.loop.odom(item[1], item[0])
 
     def _feed_scan(self, scan: LaserScan, now: float) -> None:
         self._drain_odometry()
         self.report.scans_fed += 1
         self._last_scan_stamp = scan.stamp
-        self._feed(self.sync.add_scan(scan, now))
+        self.loop.scan(scan, now)
 
     async def _odometry_task(self) -> None:
         assert self._odom_sub is not None
         with contextlib.suppress(BusClosed):
             while True:
                 for recv, pose in await self._odom_sub.recv_batch(SENSOR_QUEUE):
-                    self._feed(self.sync.add_odom(pose, recv))
+                    self.loop.odom(pose, recv)
 
     async def _lms_task(self) -> None:
         pub = self._pubs["scan"]
@@ -539,6 +551,36 @@ class Agent:
             pub.put_bytes(data)
             # the bytes just published, decoded: the pipeline sees exactly what is recorded
             self._feed_scan(decode_laser_scan(data), now)
+
+    async def _recording_task(self) -> None:
+        """``[laser] source = "recording"``: the file's scans and odometry, paced, through the
+        sensor loop with their recorded arrival times (so the housekeeping's timeouts go by the
+        recording's clock), each published on the bus as the robot's own first."""
+        from agent.recording.feed import RecordingFeed
+
+        lc = self.config.laser
+        assert lc.recording is not None
+        feed = RecordingFeed(lc.recording, speed=lc.speed, duration=lc.duration)
+        self._clock = lambda: self._feed_time
+        pub_scan, pub_odom = self._pubs["scan"], self._pubs["odom"]
+        log.info("playing %s (robot %s) at %g x recorded speed", lc.recording, feed.robot, lc.speed)
+        async for msg in feed:
+            self._feed_time = msg.arrival
+            if msg.kind == "odom":
+                assert isinstance(msg.value, Pose2D)
+                pub_odom.put_bytes(POSE_CODEC.encode(msg.value))
+                self.loop.odom(msg.value, msg.arrival)
+            else:
+                assert isinstance(msg.value, LaserScan)
+                pub_scan.put_bytes(LASER_SCAN_CODEC.encode(msg.value))
+                self._feed_scan(msg.value, msg.arrival)
+        log.info(
+            "the recording ended: %d scans, %d odometry messages (%d invalid)%s",
+            feed.scans,
+            feed.odometry,
+            feed.invalid_scans + feed.invalid_odometry,
+            f", cut at {lc.duration:g} s" if feed.cut else "",
+        )
 
     async def _scan_bus_task(self) -> None:
         assert self._scan_sub is not None
@@ -553,7 +595,7 @@ class Agent:
             await asyncio.sleep(TICK)
             self._drain_odometry()
             before = self.sync.stats.no_odometry
-            self._feed(self.sync.expire(time.time()))
+            self.loop.tick(self._clock())
             if self.sync.stats.no_odometry > before and time.monotonic() - self._warned_no_odom > 10.0:
                 self._warned_no_odom = time.monotonic()
                 log.warning(
@@ -571,50 +613,49 @@ class Agent:
                         self.live.on_concepts(self.concepts.snapshot() if self.concepts is not None else None)
 
     # ------------------------------------------------------------------ per scan
-    def _feed(self, matched: list[Matched]) -> None:
+    def _step(self, m: Matched) -> None:
+        """One scan through the pipeline and out on the bus (the sensor loop's step)."""
         pipeline = self.pipeline
         assert pipeline is not None
-        for m in matched:
-            t0 = time.perf_counter()
-            try:
-                result = pipeline.process(m.scan, m.pose)
-                self._publish(result)
-            except Exception as exc:
-                self.report.errors += 1
-                # a bug or a strange scan: say so, but do not flood the log
-                self._ratelog(
-                    "scan",
-                    "processing scan %d (stamp %.3f) failed (%d so far); it is skipped",
-                    m.scan.seq,
-                    m.scan.stamp,
-                    self.report.errors,
-                    exc=exc,
-                )
-                continue
-            self._last_processed_stamp = m.scan.stamp
-            self._process_ms.append((time.perf_counter() - t0) * 1e3)
-            if self._ready is None and self.session is not None:
-                # the map and the models are loaded, the kernels compiled, a scan went through
-                self._ready = declare_ready(self.session, self.robot, "agent")
-                log.info("ready: the first scan is processed (%s)", self.keys.ready("agent"))
-            if pipeline.tracking_errors > self._tracking_errors:  # on the tracker's thread
-                self._tracking_errors = pipeline.tracking_errors
-                self._ratelog(
-                    "tracking",
-                    "pose tracking failed on a scan (%d so far; that scan keeps the correction before it): %s",
-                    pipeline.tracking_errors,
-                    pipeline.last_tracking_error,
-                )
-            self._age_ms.append((time.time() - result.stamp) * 1e3)
-            for name, seconds in self._compiles.take():
-                self.compiled.append(name)
-                log.warning(
-                    "kernel %s was compiled while processing scan %d (%.2f s of the loop): "
-                    "the warm-up does not reach it (agent/core/warmup.py)",
-                    name,
-                    m.scan.seq,
-                    seconds,
-                )
+        t0 = time.perf_counter()
+        result = pipeline.process(m.scan, m.pose)
+        self._publish(result)
+        self._last_processed_stamp = m.scan.stamp
+        self._process_ms.append((time.perf_counter() - t0) * 1e3)
+        if self._ready is None and self.session is not None:
+            # the map and the models are loaded, the kernels compiled, a scan went through
+            self._ready = declare_ready(self.session, self.robot, "agent")
+            log.info("ready: the first scan is processed (%s)", self.keys.ready("agent"))
+        if pipeline.tracking_errors > self._tracking_errors:  # on the tracker's thread
+            self._tracking_errors = pipeline.tracking_errors
+            self._ratelog(
+                "tracking",
+                "pose tracking failed on a scan (%d so far; that scan keeps the correction before it): %s",
+                pipeline.tracking_errors,
+                pipeline.last_tracking_error,
+            )
+        self._age_ms.append((time.time() - result.stamp) * 1e3)
+        for name, seconds in self._compiles.take():
+            self.compiled.append(name)
+            log.warning(
+                "kernel %s was compiled while processing scan %d (%.2f s of the loop): "
+                "the warm-up does not reach it (agent/core/warmup.py)",
+                name,
+                m.scan.seq,
+                seconds,
+            )
+
+    def _step_failed(self, m: Matched, exc: Exception) -> None:
+        """A scan the pipeline failed on: skipped (the loop counts it), said without flooding."""
+        self.report.errors = self.loop.errors
+        self._ratelog(
+            "scan",
+            "processing scan %d (stamp %.3f) failed (%d so far); it is skipped",
+            m.scan.seq,
+            m.scan.stamp,
+            self.loop.errors,
+            exc=exc,
+        )
 
     def _publish(self, result: StepResult) -> None:
         self._cells["place"].set(place_message(result))
@@ -944,7 +985,7 @@ class Agent:
             "sync": self.sync.stats.as_dict(),
             "latency_ms": {"process": _percentiles(self._process_ms), "age": _percentiles(self._age_ms)},
             **self._tracking_extra(),
-            "errors": self.report.errors,
+            "errors": self.loop.errors,
             "restarts": self.restarts.as_dict(),
             "saves": self.report.saves,
             "compiles": len(self.compiled),
@@ -981,7 +1022,7 @@ class Agent:
             ):
                 await asyncio.sleep(TICK / 2)
                 self._drain_odometry()
-                self._feed(self.sync.expire(time.time()))
+                self.loop.tick(self._clock())
             for name in ("housekeeping", "diagnostics", "odometry", "dialogue", "camera", "ros2"):
                 await _cancel(tasks.get(name))
             if self._ros2 is not None:
@@ -992,7 +1033,7 @@ class Agent:
             await self._close_concepts()
             if self._odom_sub is not None:
                 self._odom_sub.close()
-            self._feed(self.sync.close())
+            self.loop.close()
             if self.pipeline is not None and (self._dirty or self.pipeline.scans):
                 await self._save()
             if self.pipeline is not None:
@@ -1041,6 +1082,7 @@ class Agent:
         snap = self.stats.snapshot()
         s = self.sync.stats
         r.scans_processed = self.pipeline.scans if self.pipeline else 0
+        r.errors = self.loop.errors
         r.restarts = self.restarts.as_dict()
         r.drops = {
             "driver": self._lms.stats.dropped + self._lms.dropped if self._lms is not None else 0,

@@ -108,6 +108,12 @@ def register(subparsers: Any) -> None:
     p.add_argument(
         "--fresh", action="store_true", help="start from an empty map even if the live run resumed one"
     )
+    p.add_argument(
+        "--duration",
+        type=positive_float,
+        metavar="SECONDS",
+        help="replay only the first SECONDS of the recording",
+    )
     p.set_defaults(handler=_replay)
 
 
@@ -178,6 +184,7 @@ def _replay(args: argparse.Namespace) -> int:
                 on_step=on_step,
                 progress=progress,
                 on_pipeline=on_pipeline,
+                duration=args.duration,
             )
         if live is not None:
             _linger(live, args.linger)

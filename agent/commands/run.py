@@ -26,7 +26,12 @@ def register(subparsers: Any) -> None:
             "doorway, hallway), build the navigation graph and its areas, publish them on the Zenoh "
             "bus, answer state queries, and keep the map across restarts. Stops on Ctrl-C or SIGTERM."
         ),
-        epilog="Example: loci run --config deploy/robot.toml --record 'runs/%Y%m%d-%H%M%S.mcap' --foxglove 8765",
+        epilog=(
+            "Examples:\n"
+            "  loci run --config deploy/robot.toml --record 'runs/%%Y%%m%%d-%%H%%M%%S.mcap' --foxglove 8765\n"
+            "  loci run --config robot.toml --play run.mcap   # the live agent on a recording, at recorded speed"
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument(
         "--config",
@@ -44,6 +49,24 @@ def register(subparsers: Any) -> None:
         "--state-dir", type=Path, metavar="DIR", help="where the map persists (overrides [state] dir)"
     )
     p.add_argument("--model", metavar="MODEL.npz", help="the place model (overrides [places] model)")
+    p.add_argument(
+        "--play",
+        metavar="IN.mcap",
+        help="take the scans and the odometry from this recording instead of the robot's devices, "
+        "through the live agent at recorded speed ([laser] source = 'recording'); it stops at the end",
+    )
+    p.add_argument(
+        "--speed",
+        type=float,
+        metavar="FACTOR",
+        help="with --play: FACTOR times recorded speed (default 1)",
+    )
+    p.add_argument(
+        "--duration",
+        type=float,
+        metavar="SECONDS",
+        help="with --play: only the first SECONDS of the recording",
+    )
     p.add_argument(
         "--foxglove",
         metavar="[HOST:]PORT",
@@ -64,6 +87,10 @@ def _run(args: argparse.Namespace) -> int:
             "state.dir": args.state_dir,
             "places.model": args.model,
             "foxglove.listen": args.foxglove,
+            "laser.source": "recording" if args.play else None,
+            "laser.recording": args.play,
+            "laser.speed": args.speed,
+            "laser.duration": args.duration,
         },
     )
     return asyncio.run(_main(config))
@@ -78,9 +105,10 @@ async def _main(config: Any) -> int:
         loop.add_signal_handler(sig, stop.set)
 
     def ready(agent: Agent) -> None:
-        laser = (
-            f"LMS on {config.laser.port}" if config.laser.source == "lms" else f"scans from {agent.keys.scan}"
-        )
+        laser = {
+            "lms": f"LMS on {config.laser.port}",
+            "recording": f"the recording {config.laser.recording} (scans and odometry)",
+        }.get(config.laser.source, f"scans from {agent.keys.scan}")
         parts = [
             f"laser: {laser}",
             f"odometry: {agent.keys.odom}",

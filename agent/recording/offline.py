@@ -63,6 +63,7 @@ class ReplayOutcome:
         skipped: scans after the live run's last one (see the module docstring).
         errors: scans whose processing raised (logged; the scan is skipped, as live).
         truncated: the file ended without its footer (the writer crashed).
+        cut: the replay stopped at its ``duration``, before the end of the file.
         live: the live run's final counters, if the recording has them.
         sync: the odometry association's counters; sync_params: its parameters.
         edits, edits_failed: recorded map edits made again, and those that did not fit.
@@ -79,6 +80,7 @@ class ReplayOutcome:
     edits: int = 0
     edits_failed: int = 0
     truncated: bool = False
+    cut: bool = False
     resumed: bool = False
     live: dict[str, Any] | None = None
     sync: dict[str, int] = field(default_factory=dict)
@@ -211,6 +213,7 @@ def replay_recording(
     on_step: Callable[[StepResult], None] | None = None,
     progress: Callable[[str, int, int], None] | None = None,
     on_pipeline: Callable[[Any], None] | None = None,
+    duration: float | None = None,
 ) -> ReplayOutcome:
     """Replay a recording through the pipeline (see the module docstring).
 
@@ -229,17 +232,18 @@ def replay_recording(
         progress: ``progress(stage, done, total)`` over the scans (when the file says how many).
         on_pipeline: called once with the pipeline before the first message (the live view
             reads its graph and areas).
+        duration: replay only the first seconds of the recording (the rest is not read).
 
     Raises:
         DataError: the file is missing or not MCAP, or has no scans of the robot.
     """
-    from agent.bus.codecs import LASER_SCAN_CODEC, POSE_CODEC, checked_decode
     from agent.bus.keys import RobotKeys
-    from agent.core.odom_sync import OdomSync, SyncParams
+    from agent.core.odom_sync import SyncParams
     from agent.core.pipeline import Pipeline, PipelineParams
+    from agent.core.sensor_loop import SensorLoop
+    from agent.recording.feed import RecordingFeed
     from agent.recording.importer import as_loci_recording
-    from agent.recording.replay import Replay
-    from knowledge.errors import DataError, ProtocolError
+    from knowledge.errors import DataError
     from knowledge.fileio import file_sha256
     from knowledge.places.model import PlaceModel, default_model_path
 
@@ -286,11 +290,17 @@ def replay_recording(
         pipeline = Pipeline.from_state(json.loads(initial), model, params)
     else:
         pipeline = Pipeline(model, params)
-    associate = OdomSync(sync)
     live = finals.get(keys.diagnostics)
     last = live.get("last_scan_stamp") if live else None
     out = ReplayOutcome(pipeline=pipeline, resumed=outcome_resumed, live=live, sync_params=sync.to_table())
-    replay = Replay(p, speed=speed, topics={keys.scan, keys.odom})
+    feed = RecordingFeed(
+        p,
+        robot=robot,
+        meta=meta,
+        speed=speed,
+        until=last if isinstance(last, int | float) else None,
+        duration=duration,
+    )
     total = _message_count(p, keys.scan)
 
     edits = deque(sorted(all_edits.get(keys.stream("map/edit"), []), key=_edit_order))
@@ -310,53 +320,37 @@ def replay_recording(
     if on_pipeline is not None:
         on_pipeline(pipeline)
 
-    def feed(matched: list[Any]) -> None:
-        for m in matched:
-            apply_edits(pipeline.last_stamp)
-            try:
-                result = pipeline.process(m.scan, m.pose)
-            except Exception:  # as the live agent does: the scan is skipped
-                out.errors += 1
-                if out.errors <= 5:
-                    log.exception(
-                        "processing scan %d (stamp %.3f) failed; it is skipped", m.scan.seq, m.scan.stamp
-                    )
-                continue
-            if on_step is not None:
-                on_step(result)
+    def step(m: Any) -> None:
+        apply_edits(pipeline.last_stamp)
+        result = pipeline.process(m.scan, m.pose)
+        if on_step is not None:
+            on_step(result)
 
-    for msg in replay:
-        out.messages += 1
-        now = msg.log_time_ns * 1e-9
-        if msg.topic == keys.odom:
-            out.odometry += 1
-            try:
-                pose = checked_decode(POSE_CODEC, msg.zenoh_encoding, msg.data, msg.topic)
-            except ProtocolError:
-                out.invalid_odometry += 1
-                continue
-            feed(associate.add_odom(pose, now))
-            continue
-        out.scans += 1
-        if progress is not None and total and (out.scans % 50 == 0 or out.scans == total):
-            progress("replay", out.scans, total)
-        try:
-            scan = checked_decode(LASER_SCAN_CODEC, msg.zenoh_encoding, msg.data, msg.topic)
-        except ProtocolError:
-            out.invalid_scans += 1
-            continue
-        if isinstance(last, int | float) and scan.stamp > last:
-            out.skipped += 1
-            continue
-        feed(associate.add_scan(scan, now))
-    feed(associate.close())
-    pipeline.close()  # the tracker's thread, if it has one
+    loop = SensorLoop(sync, step)
+    try:
+        for message in feed:
+            loop.feed(message)
+            if progress is not None and total and message.kind == "scan" and loop.scans % 50 == 0:
+                progress("replay", feed.scans, total)
+        loop.close()
+    finally:
+        pipeline.close()  # the tracker's thread, if it has one
+    if progress is not None and total:
+        progress("replay", feed.scans, total)
     apply_edits(pipeline.last_stamp)
-    if edits:
+    if edits and not feed.cut:
         log.warning("%s: %d map edits came after the last replayed scan; not applied", p, len(edits))
         out.edits_failed += len(edits)
-    out.truncated = replay.truncated
-    out.sync = associate.stats.as_dict()
+    out.messages = feed.messages
+    out.scans = feed.scans
+    out.odometry = feed.odometry
+    out.invalid_scans = feed.invalid_scans
+    out.invalid_odometry = feed.invalid_odometry
+    out.skipped = feed.skipped
+    out.errors = loop.errors
+    out.truncated = feed.truncated
+    out.cut = feed.cut
+    out.sync = loop.sync.stats.as_dict()
     return out
 
 

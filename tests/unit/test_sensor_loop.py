@@ -58,7 +58,7 @@ def test_close_hands_on_what_odometry_covers_and_drops_the_rest() -> None:
     loop.odom(Pose2D(0, 0, 0, stamp=1.4), 1.4)
     loop.odom(Pose2D(1, 0, 0, stamp=1.6), 1.6)
     loop.scan(_scan(1.5), 1.6)
-    loop.scan(_scan(3.0), 1.7)
+    loop.scan(_scan(1.9), 1.7)
     assert loop.pending == 1
     loop.close()
     assert [m.scan.stamp for m in got] == [1.5]

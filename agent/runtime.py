@@ -10,9 +10,12 @@
    the initial state, the pipeline parameters and the model's hash in the file's metadata;
 4. declare the publishers, the queryables ``state/graph``, ``state/areas``, ``state/place``
    (answered from :class:`~agent.bus.queryable.StateCell` s) and the odometry subscription;
-5. open the laser: an LMS 2xx on ``laser.port`` (each scan it gives is published on
-   ``loci/<robot>/scan`` and then processed, so the recording holds exactly the scans the
-   agent saw) or a subscription to ``loci/<robot>/scan``;
+5. open the laser: an LMS 2xx on ``laser.port`` (read and stamped on a thread of its own,
+   :mod:`drivers.threaded`; each scan it gives is published on ``loci/<robot>/scan`` and then
+   processed, so the recording holds exactly the scans the agent saw), a subscription to
+   ``loci/<robot>/scan``, or a recording (``[laser] source = "recording"``: its scans and
+   odometry, paced, published as the robot's own and processed with their recorded arrival
+   times; the agent stops at its end);
 6. run until ``stop`` is set (SIGINT/SIGTERM in ``loci run``).
 
 Every task runs under :func:`~agent.supervisor.supervise`: a task that raises is logged (its
@@ -21,19 +24,25 @@ and the diagnostics) and started again after a back-off (0.1 s doubling to 5 s);
 failure stops the agent. The recorder is not restarted (its file is closed when it fails);
 the agent runs on without recording.
 
-Tasks (one event loop, one thread for the core): the **laser** task (driver or bus), the
-**odometry** task (bus), the **housekeeping** task (every 50 ms: expire scans that waited
-too long for odometry, save the state when it changed and ``state.save_interval`` passed),
-the **diagnostics** task (every ``diagnostics.period``) and the **recorder** task. Both
-sensor tasks feed one :class:`~agent.core.odom_sync.OdomSync`; each scan it releases is
-processed at once, synchronously (about 1 ms), by the :class:`~agent.core.pipeline.Pipeline`, in
-stamp order. Before a scan enters the sync, the odometry already queued is taken first, so
-arrival order is kept across the two streams.
+Tasks (one event loop, one thread for the core): the **laser** task (driver, bus or
+recording), the **odometry** task (bus), the **housekeeping** task (every 50 ms: expire
+scans that waited too long for odometry, save the state when it changed and
+``state.save_interval`` passed), the **diagnostics** task (every ``diagnostics.period``) and
+the **recorder** task. Both sensor tasks feed the one sensor loop
+(:class:`~agent.core.sensor_loop.SensorLoop`, the same that ``loci replay`` runs): each scan
+the odometry association releases goes at once, synchronously (a few ms), through the
+:class:`~agent.core.pipeline.Pipeline` and out on the bus, in stamp order. Before a scan
+enters the loop, the odometry already queued is taken first, so arrival order is kept across
+the two streams. The warm-up compiles every kernel before the laser opens
+(:mod:`agent.core.warmup`); the agent declares itself ready (``loci/<robot>/ready/agent``)
+once its first scan is processed.
 
-Queues: the driver keeps ``laser.queue_size`` scans (drop-oldest, counted); the bus
-subscriptions keep 256 samples each (drop-oldest, counted); the recorder waits (bounded).
-None of them drops while the agent keeps up; the diagnostics and the final report say if
-one did.
+Queues: the driver thread keeps ``laser.queue_size`` scans read and not yet processed
+(about 7 s; drop-oldest beyond, counted ``driver``); the bus subscriptions keep 256 samples
+each (drop-oldest, counted); the recorder waits (bounded). An agent that falls behind (a
+busy machine) processes every scan later rather than fewer of them, so its result does not
+depend on its speed; only one more than these queues behind loses scans, and the diagnostics
+and the final report say so.
 
 Published per processed scan: ``place`` (``loci.place/1``), ``tf`` (odom → laser; map →
 laser with ``[localization]`` tracking, which also publishes ``tf/map``, map → odom),

@@ -41,27 +41,22 @@ def per_scan(path: Path, model: Any, people: bool, limit: int | None) -> np.ndar
     """Milliseconds of each ``Pipeline.process`` over the recording's matched scans."""
     from dataclasses import replace
 
-    from agent.bus.codecs import LASER_SCAN_CODEC, POSE_CODEC, checked_decode
-    from agent.core.odom_sync import OdomSync, SyncParams
+    from agent.core.odom_sync import Matched, SyncParams
     from agent.core.pipeline import PeopleParams, Pipeline, PipelineParams
+    from agent.core.sensor_loop import SensorLoop
     from agent.core.warmup import warm_up
+    from agent.recording.feed import RecordingFeed
     from agent.recording.offline import read_recording_metadata
-    from agent.recording.replay import McapMessages
 
     meta = read_recording_metadata(path)
     params = PipelineParams.from_table(json.loads(meta["pipeline"]))
     params = replace(params, people=PeopleParams(enabled=people))
-    sync = OdomSync(SyncParams(reorder=1.0))
-    pairs = []
-    for msg in McapMessages(path):
-        now = msg.log_time_ns * 1e-9
-        if msg.topic.endswith("/odom"):
-            pairs += sync.add_odom(checked_decode(POSE_CODEC, msg.zenoh_encoding, msg.data, msg.topic), now)
-        elif msg.topic.endswith("/scan"):
-            pairs += sync.add_scan(
-                checked_decode(LASER_SCAN_CODEC, msg.zenoh_encoding, msg.data, msg.topic), now
-            )
-    pairs += sync.close()
+    pairs: list[Matched] = []
+    # the agent's sensor loop gathers the scans with their poses; the pipeline is timed below
+    loop = SensorLoop(SyncParams(reorder=1.0), pairs.append)
+    for message in RecordingFeed(path, meta=meta):
+        loop.feed(message)
+    loop.close()
     pairs = pairs[:limit] if limit else pairs
     warm_up(model, params)
     pipeline = Pipeline(model, params)

@@ -15,7 +15,7 @@ OUT ?= out
 TEST_WORKERS ?= 2
 PYTEST := $(BIN)/pytest -n $(TEST_WORKERS) --dist loadfile
 
-.PHONY: help install demo test lint typecheck unit integration quick eval bench fuzz default-models clean
+.PHONY: help install demo test lint typecheck unit integration quick eval bench fuzz default-models clean check-tours
 
 help:
 	@echo "make demo   install (into .venv) and run the main job: loci demo"
@@ -23,6 +23,7 @@ help:
 	@echo "make quick  the tests not marked slow (while working)"
 	@echo "make eval   leave-one-building-out and real-log evaluations on ../shared/data (long)"
 	@echo "make bench  benchmarks, as ratios against baselines run in the same process (long)"
+	@echo "make check-tours  TOURS guided tours (default 20) as is, on one core, on one core beside a busy loop (long)"
 	@echo "make fuzz   reliability probes: a million SICK telegrams, 10,000 messages per bus key, 30 serial replugs (long)"
 	@echo "make default-models  retrain the bundled place models on ../shared/data (long)"
 	@echo "make clean  remove .venv and outputs"
@@ -80,6 +81,11 @@ eval: $(EVAL_STAMP)
 
 default-models: $(STAMP)
 	$(BIN)/loci places train-default --cache /tmp/loci-places-cache
+
+# The guided tour on any computer: TOURS seeds in each of three conditions (docs/demo.md).
+TOURS ?= 20
+check-tours: $(STAMP)
+	$(BIN)/python -m tools.check_tours --tours $(TOURS) --out docs/results
 
 bench: $(BENCH_STAMP)
 	$(BIN)/python -m tools.bench --out docs/results

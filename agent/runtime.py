@@ -871,7 +871,9 @@ class Agent:
             ),
         )
         if self._recogniser is not None:
-            self._camera_sub = subscribe_stream(session, self.robot, "camera", capacity=1, stats=self.stats)
+            # frames wait their turn (a busy agent recognises the same frames, later: the look
+            # around chooses them by stamp); beyond 64 the oldest go, counted
+            self._camera_sub = subscribe_stream(session, self.robot, "camera", capacity=64, stats=self.stats)
             self._spawn(tasks, "camera", self._camera_task)
 
     def _send(self, out: Outgoing) -> None:
@@ -915,7 +917,8 @@ class Agent:
             log.error("the concepts snapshot is not a valid loci.concepts/1: %s", exc)
 
     async def _camera_task(self) -> None:
-        """Recognise objects in camera frames while the dialogue looks around (newest frame only).
+        """Recognise objects in the camera frames a look around chooses (by their stamps:
+        :meth:`~agent.conversation.agent.DialogueAgent.frame_due`), in order.
 
         A frame is decoded off the event loop, and only if its header says it is no larger
         than ``[camera]``'s ``width`` x ``height`` (and its bytes fit such a frame); a larger
@@ -926,7 +929,7 @@ class Agent:
         with contextlib.suppress(BusClosed):
             while True:
                 frame = await self._camera_sub.recv()
-                if not self.dialogue.looking or frame.jpeg is None:
+                if frame.jpeg is None or not self.dialogue.frame_due(frame.stamp):
                     continue
                 try:
                     image = await asyncio.to_thread(
@@ -937,6 +940,7 @@ class Agent:
                     self._ratelog(
                         "camera/frame", "camera: refused frame %d: %s", frame.seq, exc, level=logging.WARNING
                     )
+                    self.dialogue.frame_done(frame.stamp)
                     continue
                 try:
                     detections = await asyncio.to_thread(self._recogniser.recognise, image)
@@ -944,9 +948,11 @@ class Agent:
                     self._ratelog(
                         "camera/recognise", "object recognition failed on frame %d", frame.seq, exc=exc
                     )
+                    self.dialogue.frame_done(frame.stamp)
                     continue
                 for out in await self.dialogue.on_detections(detections, frame.stamp):
                     self._send(out)
+                self.dialogue.frame_done(frame.stamp)
 
     async def _commit_map(self) -> None:
         """Save the map now if it changed since the last save (the dialogue awaits this before

@@ -76,6 +76,13 @@ T = TypeVar("T")
 
 #: Turn rate of "look around", rad/s (a full turn takes 2π / this).
 LOOK_OMEGA = 0.6
+#: Seconds of frame stamps between the frames a look around recognises (every 0.3 rad of the
+#: turn): chosen by their stamps, not by how fast the machine gets through them, so a busy
+#: computer recognises the same frames, later.
+LOOK_FRAME_INTERVAL = 0.5
+#: Seconds after the turn a look around waits for the camera's frames before it reports
+#: with what it has (a camera that stopped).
+LOOK_GRACE = 5.0
 #: Seconds "Where are you?" waits for a reasoning that is due (the map changed since the
 #: last one: the snapshot's inferred types are those of before the change) before it answers.
 REASONING_WAIT = 2.0
@@ -153,10 +160,18 @@ class _Question:
 
 @dataclass
 class _Look:
+    """A look around: from ``start`` to ``until`` (the turn), the frames taken from ``next_frame``
+    on, every :data:`LOOK_FRAME_INTERVAL` of their stamps; ``handled`` the newest frame stamp
+    recognised or passed over (the report waits until a frame from after the turn is)."""
+
     intent: str
     speaker: str | None
     until: float
     seen: dict[str, dict[str, Any]] = field(default_factory=dict)
+    start: float = 0.0
+    next_frame: float = 0.0
+    handled: float = -math.inf
+    frames: int = 0
 
 
 class DialogueAgent:
@@ -687,7 +702,14 @@ class DialogueAgent:
             )
         self._here()
         self._cancel_follow()
-        self.look = _Look(str(intent["id"]), intent.get("speaker"), self.clock() + 2 * math.pi / LOOK_OMEGA)
+        now = self.clock()
+        self.look = _Look(
+            str(intent["id"]),
+            intent.get("speaker"),
+            now + 2 * math.pi / LOOK_OMEGA,
+            start=now,
+            next_frame=now,
+        )
         return [
             self.say(intent, "look_around", "accepted", {}, text="I am looking around."),
             self._twist(LOOK_OMEGA),
@@ -802,6 +824,24 @@ class DialogueAgent:
         """Whether camera frames should be recognised now."""
         return self.look is not None
 
+    def frame_due(self, stamp: float) -> bool:
+        """Whether the camera frame stamped ``stamp`` is one the look around recognises (see
+        :data:`LOOK_FRAME_INTERVAL`); a frame passed over counts as handled."""
+        look = self.look
+        if look is None:
+            return False
+        if look.start <= stamp <= look.until and stamp >= look.next_frame:
+            look.next_frame = stamp + LOOK_FRAME_INTERVAL
+            return True
+        look.handled = max(look.handled, stamp)
+        return False
+
+    def frame_done(self, stamp: float) -> None:
+        """The frame stamped ``stamp`` was recognised (or failed to decode)."""
+        if self.look is not None:
+            self.look.handled = max(self.look.handled, stamp)
+            self.look.frames += 1
+
     async def on_detections(self, detections: Sequence[Any], stamp: float) -> list[Outgoing]:
         """Recognised objects (``name``, ``kind``, ``score``...) in a frame taken at ``stamp``:
         objects of the current area at the current node, published on ``objects``."""
@@ -848,17 +888,25 @@ class DialogueAgent:
                 await result
         now = self.clock()
         if self.look is not None:
-            if now >= self.look.until:
+            # the turn is over and every frame of it is recognised (a frame from after it was
+            # handled), or the camera has been silent too long
+            done = now >= self.look.until and (
+                self.look.handled >= self.look.until or now >= self.look.until + LOOK_GRACE
+            )
+            if done:
                 look, self.look = self.look, None
                 objects = list(look.seen.values())
                 content = {
                     "objects": objects,
                     "area": self.area_view(self.current_area(), extra_objects=objects),
+                    "frames": look.frames,
                 }
                 out.append(self._twist(0.0))
                 out.append(self.say(None, "look_around", "ok", content, task=look.intent))
-            else:
+            elif now < self.look.until:
                 out.append(self._twist(LOOK_OMEGA))
+            else:
+                out.append(self._twist(0.0))  # turned: waiting for the last frames' recognition
         out.extend(self.check_consistency())
         return out
 

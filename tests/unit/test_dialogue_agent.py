@@ -265,9 +265,17 @@ def test_look_around_turns_once_and_reports_what_the_camera_recognised() -> None
         ("tv", room[1], area_of(world, room[1])),
         ("couch", room[1], area_of(world, room[1])),
     ]
-    # still turning: the command is repeated; after a full turn the base stops and the report comes
+    # the frames it recognises are chosen by their stamps (every LOOK_FRAME_INTERVAL of them)
+    t0 = clock.now
+    assert agent.frame_due(t0 + 0.1) and not agent.frame_due(t0 + 0.3) and agent.frame_due(t0 + 0.65)
+    agent.frame_done(t0 + 0.65)
+    # still turning: the command is repeated; after a full turn the base stops, and the report
+    # waits until the frames of the turn are recognised (a frame from after the turn handled)
     assert [o.stream for o in asyncio.run(agent.tick())] == ["base/cmd"]
     clock.now += 2 * math.pi / turn["omega"] + 0.1
+    out = asyncio.run(agent.tick())
+    assert [o.stream for o in out] == ["base/cmd"] and out[0].message["omega"] == 0.0 and agent.looking
+    assert not agent.frame_due(clock.now)  # a frame from after the turn: passed over, handled
     out = asyncio.run(agent.tick())
     assert [o.stream for o in out] == ["base/cmd", "dialogue/say"] and out[0].message["omega"] == 0.0
     report = out[1].message
@@ -278,7 +286,7 @@ def test_look_around_turns_once_and_reports_what_the_camera_recognised() -> None
         {"name": "couch", "kind": "Couch"},
     ]
     assert {o["name"] for o in report["content"]["area"]["objects"]} == {"tv", "couch"}
-    assert "television" in report["text"] and not agent.looking
+    assert "television" in report["text"] and not agent.looking and report["content"]["frames"] == 1
     # the objects are in the concepts: "where is the television?"
     reply, _ = handle(agent, intent("ask_where", target={"head": "television"}))
     assert reply["content"]["node"] == room[1]
@@ -437,3 +445,19 @@ def test_a_robot_not_sure_of_its_pose_says_so_when_it_arrives_and_where_it_is() 
     agent.on_localization(Confidence("tracking", (0.03, 0.03), 0.9))
     where, _ = handle(agent, intent("ask_place"))
     assert "certain" not in where["content"] and where["text"].startswith("I am in")
+
+
+def test_a_look_around_whose_camera_stopped_reports_after_a_grace() -> None:
+    from agent.conversation.agent import LOOK_GRACE
+
+    world, _, _, room = office()
+    agent, clock = agent_for(world, can_recognise=True)
+    world.graph.current = room[1]
+    _, rest = handle(agent, intent("look_around"))
+    (turn,) = [o.message for o in rest if o.stream == "base/cmd"]
+    clock.now += 2 * math.pi / turn["omega"] + 0.1
+    assert [o.stream for o in asyncio.run(agent.tick())] == ["base/cmd"]  # waits for frames
+    clock.now += LOOK_GRACE
+    out = asyncio.run(agent.tick())
+    assert [o.stream for o in out] == ["base/cmd", "dialogue/say"] and not agent.looking
+    assert out[1].message["content"]["frames"] == 0

@@ -146,7 +146,7 @@ def markdown(report: dict[str, list[dict[str, Any]]], command: str) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m tools.check_tours", description=__doc__.split("\n\n")[0])
     ap.add_argument("--tours", type=int, default=20, help="tours per condition (seeds 0 … N-1; default 20)")
     ap.add_argument(
@@ -156,6 +156,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--work", type=Path, default=Path("out/tours"), help="the tours' output folders")
     ap.add_argument("--out", type=Path, default=None, help="write tours.json and tours.md here")
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = build_parser()
     args = ap.parse_args(argv)
     conditions = [c for c in args.conditions.split(",") if c]
     bad = [c for c in conditions if c not in CONDITIONS]

@@ -290,7 +290,10 @@ class PipelineParams:
             raise ConfigError(f"pipeline parameters: mount must be [x, y, yaw], got {mount!r}")
         return cls(
             mount=(float(mount[0]), float(mount[1]), float(mount[2])),
-            local_map=build_dataclass(LocalMapParams, table.get("local_map", {}), "local_map"),
+            # a table without "grazing" was written before the grazing-beam rule: none (as recorded)
+            local_map=build_dataclass(
+                LocalMapParams, {"grazing": None, **table.get("local_map", {})}, "local_map"
+            ),
             rear_beams=build_dataclass(FullScanParams, table.get("rear_beams", {}), "rear_beams"),
             graph=build_dataclass(GraphParams, table.get("graph", {}), "graph"),
             doorways=build_dataclass(DoorwayParams, table.get("doorways", {}), "doorways"),

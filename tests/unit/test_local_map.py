@@ -145,3 +145,30 @@ def test_clear_and_checks() -> None:
         LocalMapParams(max_points=0)
     with pytest.raises(ValueError, match="radius"):
         LocalMapParams(radius=-1.0)
+
+
+def test_a_surface_seen_end_on_is_not_cleared_by_the_beams_that_run_along_it() -> None:
+    """A table's side seen from beside it, then end-on (the robot on the line of its side):
+    the beams along it pass its points by a hair and see nothing through it; only the rule
+    before cleared them (the wall beyond the tour's false doorway went so)."""
+    # the side: points every 2 cm on the line y = 1.0 from x = 2 to 3.5, seen from (2.5, 0)
+    side = np.column_stack([np.linspace(2.0, 3.5, 76), np.full(76, 1.0)])
+    seen_from = np.array([2.5, 0.0, math.pi / 2])
+    rel = to_robot_frame(side, seen_from)
+    bearings, dists = np.arctan2(rel[:, 1], rel[:, 0]), np.hypot(rel[:, 0], rel[:, 1])
+    ranges = np.full(361, 30.0)
+    idx = np.clip(np.round((bearings + math.pi / 2) / (math.pi / 360)).astype(int), 0, 360)
+    ranges[idx] = dists
+    for grazing, kept in ((0.1, True), (None, False)):
+        m = LocalMap(LocalMapParams(grazing=grazing))
+        m.add(ranges, SICK, seen_from, stamp=0.0, range_max=30.0)
+        near = (np.abs(m.points[:, 1] - 1.0) < 0.02) & (m.points[:, 0] > 2.05)
+        before = int(near.sum())
+        assert before > 8
+        # end-on: the laser 3 mm beside the side's line, looking along it; nothing ahead for 30 m
+        on_line = np.array([1.5, 0.997, 0.0])
+        m.add(np.full(361, 30.0), SICK, on_line, stamp=0.1, range_max=30.0)
+        still = int(((np.abs(m.points[:, 1] - 1.0) < 0.02) & (m.points[:, 0] > 2.05)).sum())
+        assert (still == before) if kept else (still < before), (grazing, before, still)
+    with pytest.raises(ValueError, match="grazing"):
+        LocalMapParams(grazing=2.0)

@@ -235,6 +235,7 @@ MAY_PUBLISH: dict[str, set[str]] = {
         "objects",
         "map/edit",
         "localization/pose",
+        "localization/status",
         "localization/scene",
         "dialogue/say",
         "dialogue/ask",
@@ -349,6 +350,36 @@ def test_only_the_agent_answers_state_queries_and_a_huge_message_is_dropped(rout
         for q in qs:
             q.undeclare()
         sub.undeclare()
+    finally:
+        for s in reversed(sessions.values()):
+            close_session(s)
+
+
+def test_each_process_says_it_is_ready_under_its_own_role_only(router: str) -> None:
+    """Ready tokens (agent/bus/ready.py) through the router: a reader sees the agent's, the
+    dialogue's and the base's; a tool cannot pass itself off as the agent."""
+    from agent.bus.ready import declare_ready, ready_roles
+
+    sessions: dict[str, zenoh.Session] = {}
+    try:
+        for user in ("agent", "dialogue", "base", "tools"):
+            sessions[user] = _user(router, user)
+        tokens = [
+            declare_ready(sessions["agent"], "r", "agent"),
+            declare_ready(sessions["dialogue"], "r", "dialogue"),
+            declare_ready(sessions["base"], "r", "sim"),
+            declare_ready(sessions["tools"], "q", "agent"),  # refused by the router
+        ]
+        deadline = time.monotonic() + 5.0
+        while (
+            ready_roles(sessions["tools"], "r") != {"agent", "dialogue", "sim"}
+            and time.monotonic() < deadline
+        ):
+            time.sleep(0.1)
+        assert ready_roles(sessions["tools"], "r") == {"agent", "dialogue", "sim"}
+        assert ready_roles(sessions["agent"], "q") == set()
+        for t in tokens:
+            t.undeclare()
     finally:
         for s in reversed(sessions.values()):
             close_session(s)

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import concurrent.futures
 import contextlib
 import logging
 import threading
@@ -66,7 +67,7 @@ class ThreadedSource(Generic[T]):
         self._caller: asyncio.AbstractEventLoop | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
-        self._pump: asyncio.Future[None] | None = None
+        self._pump: concurrent.futures.Future[None] | None = None
         self._ended = False
         self._error: BaseException | None = None
         self._lock = threading.Lock()
@@ -105,7 +106,7 @@ class ThreadedSource(Generic[T]):
             await self._stop_thread()
             raise
         assert self._loop is not None
-        self._pump = asyncio.run_coroutine_threadsafe(self._forward(), self._loop)  # type: ignore[assignment]
+        self._pump = asyncio.run_coroutine_threadsafe(self._forward(), self._loop)
 
     async def close(self) -> None:
         """Close the driver on its thread (it stops its device), then stop the thread."""

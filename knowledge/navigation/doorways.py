@@ -20,7 +20,8 @@ leaving it reports one :class:`Doorway`
 — at the narrowest measurement — if walls were seen beyond the jambs at some
 measurement (from the middle of an opening they hide behind the jambs, and a door beside a
 room's corner shows its wall on one side only) and the robot crossed the line between the
-jambs (from one side of the wall to the other) within ``max_depth`` metres of travel. Approaching a
+jambs (from one side of the wall to the other: the line through the narrowest measurement or
+through the first) within ``max_depth`` metres of travel. Approaching a
 door and turning back, or driving along a long narrow passage, gives none.
 
 The input points are best the local map's (:meth:`LocalMap.points_in_robot_frame
@@ -299,6 +300,21 @@ class DoorwayDetector:
                     result = self._step(to_robot_frame(world, q), q, t) or result
         return self._step(pts, p, stamp) or result
 
+    @staticmethod
+    def _crossed(pas: _Passage, position: np.ndarray) -> bool:
+        """Whether the robot went from one side of the opening to the other: across the line
+        through its narrowest measurement, or through its first (an opening as deep as a
+        table, whose narrowest pair of jambs moves along it as the robot goes through, may be
+        left before the robot passes the last narrowest line)."""
+        for centre in (pas.center, pas.anchor):
+            if centre is None:
+                continue
+            before = float((pas.entry - centre) @ pas.normal)
+            after = float((position - centre) @ pas.normal)
+            if before * after < 0.0:
+                return True
+        return False
+
     def _step(self, points: np.ndarray, p: np.ndarray, stamp: float) -> Doorway | None:
         """One measurement at the robot's pose ``p`` (see :meth:`update`)."""
         prm = self.params
@@ -330,9 +346,8 @@ class DoorwayDetector:
         if pas is not None:
             # leaving the opening (or meeting another one): report it if it was passed through
             pas.travelled += step
-            before = float((pas.entry - pas.center) @ pas.normal)
-            after = float((p[:2] - pas.center) @ pas.normal)
-            if pas.walls and before * after < 0.0 and pas.travelled <= prm.max_depth:
+            if pas.walls and pas.travelled <= prm.max_depth and self._crossed(pas, p[:2]):
+                after = float((p[:2] - pas.center) @ pas.normal)
                 direction = pas.normal if after > 0.0 else -pas.normal
                 result = Doorway(
                     center=(float(pas.center[0]), float(pas.center[1])),

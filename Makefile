@@ -13,7 +13,7 @@ EVAL_STAMP := $(VENV)/.installed-eval
 OUT ?= out
 # test processes (pytest-xdist; one test file per worker at a time); TEST_WORKERS=0 runs in one process
 TEST_WORKERS ?= 2
-PYTEST := $(BIN)/pytest -n $(TEST_WORKERS) --dist loadfile
+PYTEST := $(BIN)/pytest -n $(TEST_WORKERS) --dist loadfile --durations=15
 
 .PHONY: help install demo test lint typecheck unit integration quick eval bench fuzz default-models clean check-tours
 

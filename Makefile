@@ -24,7 +24,7 @@ help:
 	@echo "make eval   leave-one-building-out and real-log evaluations on ../shared/data (long)"
 	@echo "make bench  benchmarks, as ratios against baselines run in the same process (long)"
 	@echo "make check-tours  TOURS guided tours (default 20) as is, on one core, on one core beside a busy loop (long)"
-	@echo "make fuzz   reliability probes: a million SICK telegrams, 10,000 messages per bus key, 30 serial replugs (long)"
+	@echo "make fuzz   reliability probes: a million SICK telegrams, 10,000 messages per bus key, 30 serial replugs, 50 SIGKILLs (long)"
 	@echo "make default-models  retrain the bundled place models on ../shared/data (long)"
 	@echo "make clean  remove .venv and outputs"
 
@@ -95,3 +95,4 @@ clean:
 
 fuzz: $(STAMP)
 	$(BIN)/python -m tools.fuzz
+	$(BIN)/python -m tools.crash --kills 50 --out docs/results

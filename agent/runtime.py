@@ -2,21 +2,27 @@
 
 ``await Agent(config).run(stop)`` (``loci run``) does, in order:
 
-1. load the place model and, unless ``state.resume`` is off, the persisted graph
-   (``<state.dir>/navgraph.json``); compile the pipeline's kernels (a throwaway run);
-2. open the Zenoh session (closed in ``finally``, whatever happens);
-3. start the recording, if configured: a :class:`~agent.recording.recorder.Recorder` on the
+1. open the Zenoh session (closed in ``finally``, whatever happens) and declare the queryables
+   ``state/graph``, ``state/areas``, ``state/place`` (``state/concepts``) and the intent
+   subscription: until step 3 is done every query is answered with the error ``starting``
+   and every intent with a "starting" reply (nothing is taken; an agent that restarts never
+   answers from an empty map);
+2. load the place model and, unless ``state.resume`` is off, the persisted graph
+   (``<state.dir>/navgraph.json``, with the doorways the tutor confirmed); compile the
+   pipeline's kernels (a throwaway run);
+3. open the conceptual map; from now on the queryables answer from the state and the
+   dialogue serves the intents (the same subscription: none falls between);
+4. start the recording, if configured: a :class:`~agent.recording.recorder.Recorder` on the
    same session subscribing ``loci/<robot>/**`` (a session hears its own publications), with
    the initial state, the pipeline parameters and the model's hash in the file's metadata;
-4. declare the publishers, the queryables ``state/graph``, ``state/areas``, ``state/place``
-   (answered from :class:`~agent.bus.queryable.StateCell` s) and the odometry subscription;
-5. open the laser: an LMS 2xx on ``laser.port`` (read and stamped on a thread of its own,
+5. declare the publishers and the odometry subscription;
+6. open the laser: an LMS 2xx on ``laser.port`` (read and stamped on a thread of its own,
    :mod:`drivers.threaded`; each scan it gives is published on ``loci/<robot>/scan`` and then
    processed, so the recording holds exactly the scans the agent saw), a subscription to
    ``loci/<robot>/scan``, or a recording (``[laser] source = "recording"``: its scans and
    odometry, paced, published as the robot's own and processed with their recorded arrival
    times; the agent stops at its end);
-6. run until ``stop`` is set (SIGINT/SIGTERM in ``loci run``).
+7. run until ``stop`` is set (SIGINT/SIGTERM in ``loci run``).
 
 Every task runs under :func:`~agent.supervisor.supervise`: a task that raises is logged (its
 first failure of a kind with the traceback, then counts), counted (``restarts`` in the report
@@ -95,12 +101,12 @@ from agent.bus.codecs import (
 )
 from agent.bus.diagnostics import diagnostics_message, publish_diagnostics
 from agent.bus.keys import Policy, RobotKeys, robot_wildcard
-from agent.bus.queryable import StateCell, StateQueryable
+from agent.bus.queryable import NO_STATE, StateCell, StateQueryable
 from agent.bus.ready import declare_ready
 from agent.bus.scene import areas_scene, graph_scene, people_scene
 from agent.bus.session import close_session, listening_endpoints, open_session
 from agent.config import AgentConfig
-from agent.conversation.agent import DialogueAgent, Outgoing
+from agent.conversation.agent import STARTING, DialogueAgent, Outgoing, starting_reply
 from agent.conversation.memory import MemoryConcepts
 from agent.conversation.task import run_dialogue
 from agent.core.odom_sync import Matched, OdomSync
@@ -113,7 +119,7 @@ from agent.supervisor import Restarts, supervise
 from drivers.camera.jpeg import decode_image
 from drivers.messages import LaserScan, Pose2D
 from knowledge.errors import ConfigError, DataError, ProtocolError
-from knowledge.fileio import atomic_write_text, file_sha256
+from knowledge.fileio import atomic_write_text, file_sha256, remove_stale_temps
 from knowledge.people.detector import LegDetector
 from knowledge.places.model import PlaceModel
 from knowledge.topology import persistence
@@ -183,6 +189,7 @@ class AgentReport:
     nodes: int = 0
     areas: int = 0
     saves: int = 0
+    starting_replies: int = 0  # intents that came while the saved map loaded (answered "starting")
     state_file: str | None = None
     recording: str | None = None
     recorded: int = 0
@@ -237,8 +244,18 @@ class Agent:
         }
         self._last_graph: dict[str, Any] | None = None
         self._last_areas: dict[str, Any] | None = None
-        self._dirty = False
+        #: changes of the persisted state (graph, areas, confirmed doorways) made / on disk:
+        #: the state is dirty while ``_saved_gen < _gen``; saves run one at a time (a late
+        #: write of an older state never replaces a newer one)
+        self._gen = 0
+        self._saved_gen = 0
+        self._save_lock = asyncio.Lock()
+        self._save_task: asyncio.Task[None] | None = None  # the periodic save under way
+        self._saved_confirmed: frozenset[int] = frozenset()  # the doorways confirmed in the file
         self._last_save = -math.inf
+        #: while the map loads, every intent gets a "starting" reply (the task doing so)
+        self._starting: asyncio.Task[None] | None = None
+        self._started = time.monotonic()
         self._last_scan_stamp: float | None = None
         self._last_processed_stamp: float | None = None
         self._process_ms: deque[float] = deque(maxlen=1000)
@@ -270,6 +287,14 @@ class Agent:
         self.live: Any = None
         self._ros2: Any = None
 
+    @property
+    def _dirty(self) -> bool:
+        """The persisted state changed since the last save that reached the disk."""
+        return self._saved_gen < self._gen
+
+    def _mark_dirty(self) -> None:
+        self._gen += 1
+
     # ------------------------------------------------------------------ setup
     def _load(self) -> tuple[PlaceModel, Pipeline]:
         cfg = self.config
@@ -280,6 +305,8 @@ class Agent:
         model = self._model or PlaceModel.load(cfg.places.model_path)
         detector = self._people_detector()
         state = cfg.state.path
+        for tmp in remove_stale_temps(state):
+            log.warning("removed %s: a save cut short (the agent was killed while writing)", tmp)
         if cfg.state.resume and state.exists():
             try:
                 doc = json.loads(state.read_text(encoding="utf-8"))
@@ -289,6 +316,12 @@ class Agent:
                     f"{state}: {exc}. Move the file aside to start a new map, or set state.resume = false"
                 ) from exc
             self._initial_state = persistence.to_document(pipeline.graph, pipeline.areas)
+            meta = doc.get("meta") if isinstance(doc.get("meta"), dict) else {}
+            confirmed = meta.get("confirmed_doorways", [])
+            if isinstance(confirmed, list):
+                self._saved_confirmed = frozenset(
+                    int(n) for n in confirmed if isinstance(n, int) and n in pipeline.graph
+                )
             log.info(
                 "resumed the map of %s: %d nodes, %d areas",
                 state,
@@ -337,7 +370,58 @@ class Agent:
             laser_source=cfg.laser.source,
         )
 
-    def _declare(self, session: zenoh.Session) -> list[StateQueryable]:
+    def _declare_starting(self, session: zenoh.Session) -> list[StateQueryable]:
+        """What answers while the saved map loads: the state queryables (their cells say
+        ``starting``), ``dialogue/say``, and the intent subscription, served by a task that
+        replies "starting" to each intent until :meth:`_end_starting` (the dialogue then
+        serves the same subscription: no intent falls between the two)."""
+        if self.config.conceptual.on:
+            self._cells["concepts"] = StateCell("loci.concepts/1")
+        for cell in self._cells.values():
+            cell.pending = STARTING
+        queryables = [
+            StateQueryable(session, self.keys.state(name), cell) for name, cell in self._cells.items()
+        ]
+        self._pubs["dialogue/say"] = publish_stream(session, self.robot, "dialogue/say", stats=self.stats)
+        self._intent_sub = Subscription(
+            session,
+            self.keys.stream("dialogue/intent"),
+            lambda raw: raw.payload,
+            policy=Policy.WAIT,
+            capacity=64,
+            stats=self.stats,
+            name="dialogue/intent",
+        )
+        self._starting = asyncio.create_task(self._answer_starting(self._intent_sub), name="starting")
+        return queryables
+
+    async def _answer_starting(self, intents: Subscription[bytes]) -> None:
+        with contextlib.suppress(BusClosed):
+            while True:
+                for payload in await intents.recv_batch(16):
+                    self.report.starting_replies += 1
+                    reply = starting_reply(payload)
+                    if reply is None:
+                        continue
+                    try:
+                        self._send(reply)
+                    except Exception as exc:  # the intent stays unanswered; the start goes on
+                        self._ratelog("starting", "could not reply 'starting': %s", exc, exc=exc)
+
+    async def _end_starting(self) -> None:
+        """Stop the "starting" replies (cancelling at the queue's await leaves the next intent
+        queued for the dialogue)."""
+        if self._starting is None:
+            return
+        await _cancel(self._starting)
+        self._starting = None
+        if self.report.starting_replies:
+            log.info(
+                "%d intents came while the map loaded; each got a 'starting' reply",
+                self.report.starting_replies,
+            )
+
+    def _declare(self, session: zenoh.Session) -> None:
         for stream in (
             "place",
             "tf",
@@ -350,7 +434,6 @@ class Agent:
         ):
             self._pubs[stream] = publish_stream(session, self.robot, stream, stats=self.stats)
         for stream in (
-            "dialogue/say",
             "dialogue/ask",
             "base/goal",
             "base/cmd",
@@ -367,9 +450,6 @@ class Agent:
             self._pubs["scan"] = publish_stream(session, self.robot, "scan", stats=self.stats)
         if self.config.laser.source == "recording":
             self._pubs["odom"] = publish_stream(session, self.robot, "odom", stats=self.stats)
-        if self.config.conceptual.on:
-            self._cells["concepts"] = StateCell("loci.concepts/1")
-        return [StateQueryable(session, self.keys.state(name), cell) for name, cell in self._cells.items()]
 
     def _subscribe(
         self, session: zenoh.Session, stream: str, codec: Codec[T]
@@ -390,32 +470,36 @@ class Agent:
         (after the same orderly shutdown)."""
         stop = stop or asyncio.Event()
         cfg = self.config
-        model, pipeline = await asyncio.to_thread(self._load)
-        self.pipeline = pipeline
-        self.concepts = await self._start_concepts()
-        self._recogniser = await asyncio.to_thread(self._load_recogniser)
-        self.dialogue = DialogueAgent(
-            pipeline,
-            self.concepts,
-            can_recognise=self._recogniser is not None,
-            follow_factory=self._follow_factory(),
-            people=cfg.people.enabled,
-            on_map_changed=self._map_changed,
-            commit=self._commit_map,
-        )
-        # what the map already holds (a resumed map) goes to the concepts first
-        self.dialogue.on_area_events(
-            [AreaCreated(a.id, a.label, a.nodes) for a in pipeline.areas.areas.values()]
-        )
-        record_path = self._recording_path()
-        sink: McapSink | None = None
-        recorder: Recorder | None = None
+        self._started = time.monotonic()
         tasks: dict[str, asyncio.Task[Any]] = {}
         queryables: list[StateQueryable] = []
         failure: BaseException | None = None
+        sink: McapSink | None = None
+        recorder: Recorder | None = None
         session = self.session = open_session(cfg.bus)
         try:
             self.endpoints = listening_endpoints(session) if cfg.bus.picks_free_port else list(cfg.bus.listen)
+            # until the saved map is loaded, queries and intents get "starting" (never an empty map)
+            queryables = self._declare_starting(session)
+            model, pipeline = await asyncio.to_thread(self._load)
+            self.pipeline = pipeline
+            self.concepts = await self._start_concepts()
+            self._recogniser = await asyncio.to_thread(self._load_recogniser)
+            self.dialogue = DialogueAgent(
+                pipeline,
+                self.concepts,
+                can_recognise=self._recogniser is not None,
+                follow_factory=self._follow_factory(),
+                people=cfg.people.enabled,
+                on_map_changed=self._map_changed,
+                commit=self._commit_map,
+            )
+            self.dialogue.confirmed = set(self._saved_confirmed)
+            # what the map already holds (a resumed map) goes to the concepts first
+            self.dialogue.on_area_events(
+                [AreaCreated(a.id, a.label, a.nodes) for a in pipeline.areas.areas.values()]
+            )
+            record_path = self._recording_path()
             if record_path is not None:
                 sink = McapSink(record_path, overwrite=cfg.record.overwrite, metadata=self._metadata(model))
                 recorder = Recorder(
@@ -433,8 +517,19 @@ class Agent:
                 self.live = start_live_view(
                     cfg.foxglove, mount=self.params.mount, name=f"genius-loci {self.robot}"
                 )
-            queryables = self._declare(session)
+            self._declare(session)
             self._publish_state(pipeline.last_stamp or time.time(), force=True)
+            self._update_concepts_cell()
+            for cell in self._cells.values():
+                cell.pending = NO_STATE
+            await self._end_starting()
+            self._start_dialogue(session, tasks)
+            log.info(
+                "answering: the map (%d nodes, %d areas) and the concepts are loaded, %.1f s after the start",
+                len(pipeline.graph),
+                len(pipeline.areas.areas),
+                time.monotonic() - self._started,
+            )
             if cfg.laser.source != "recording":  # a recording brings its own odometry
                 self._odom_sub = self._subscribe(session, "odom", POSE_CODEC)
                 self._spawn(tasks, "odometry", self._odometry_task)
@@ -447,7 +542,6 @@ class Agent:
             else:
                 self._scan_sub = self._subscribe(session, "scan", LASER_SCAN_CODEC)
                 self._spawn(tasks, "laser", self._scan_bus_task)
-            self._start_dialogue(session, tasks)
             if cfg.ros2.on:
                 from agent.ros2.interface import Ros2Interface
 
@@ -612,8 +706,11 @@ class Agent:
                     self.keys.odom,
                     self.sync.stats.no_odometry,
                 )
-            if self._dirty and time.monotonic() - self._last_save >= interval:
-                await self._save()
+            saving = self._save_task is not None and not self._save_task.done()
+            if self._dirty and not saving and time.monotonic() - self._last_save >= interval:
+                # on a task of its own: a save waits for the concepts (a reasoning may be running)
+                self._save_task = asyncio.create_task(self._save(), name="save")
+                self._save_task.add_done_callback(self._save_done)
             self._update_concepts_cell()
             if self.live is not None and self.live.watched:
                 self.live.tick()
@@ -690,7 +787,7 @@ class Agent:
         if result.graph_changed or result.areas_changed:
             self._publish_state(result.stamp)
         if result.state_changed:
-            self._dirty = True
+            self._mark_dirty()
         for event in result.events:
             log.info("areas: %s", event)
         if self.live is not None:
@@ -846,16 +943,7 @@ class Agent:
         return lambda: FollowMe(params)
 
     def _start_dialogue(self, session: zenoh.Session, tasks: dict[str, asyncio.Task[Any]]) -> None:
-        assert self.dialogue is not None
-        self._intent_sub = Subscription(
-            session,
-            self.keys.stream("dialogue/intent"),
-            lambda raw: raw.payload,
-            policy=Policy.WAIT,
-            capacity=64,
-            stats=self.stats,
-            name="dialogue/intent",
-        )
+        assert self.dialogue is not None and self._intent_sub is not None
         self._status_sub = subscribe_stream(session, self.robot, "base/status", stats=self.stats)
         intent_stats = self.stats.stream("dialogue/intent")
         dialogue, intent_sub, status_sub = self.dialogue, self._intent_sub, self._status_sub
@@ -896,7 +984,7 @@ class Agent:
         except Exception:  # the map changed all the same; a replay will miss the edit
             log.exception("publishing the map edit %s failed", edit)
         self._publish_state(time.time())
-        self._dirty = True
+        self._mark_dirty()
 
     def _update_concepts_cell(self) -> None:
         cell = self._cells.get("concepts")
@@ -955,26 +1043,59 @@ class Agent:
                 self.dialogue.frame_done(frame.stamp)
 
     async def _commit_map(self) -> None:
-        """Save the map now if it changed since the last save (the dialogue awaits this before
-        it acknowledges a fact about an area: the area must survive a kill with the fact)."""
-        if self._dirty and self.pipeline is not None:
-            saves = self.report.saves
-            await self._save()
-            if self.report.saves == saves:
-                raise DataError(f"the map could not be saved to {self.config.state.path}; see the log")
+        """Return once every change of the map made so far is on disk (the dialogue awaits
+        this before it acknowledges a fact about an area or an answer about a door: the area
+        must survive a kill with the fact). A save already under way with an older state
+        does not count: this one waits for it and writes again.
+
+        Raises:
+            DataError: the map could not be saved (the fact is not acknowledged).
+        """
+        if self.pipeline is None:
+            return
+        if self.dialogue is not None and frozenset(self.dialogue.confirmed) != self._saved_confirmed:
+            self._mark_dirty()
+        wanted = self._gen
+        async with self._save_lock:
+            if self._saved_gen >= wanted:
+                return
+            await self._save_locked()
+        if self._saved_gen < wanted:
+            raise DataError(f"the map could not be saved to {self.config.state.path}; see the log")
+
+    def _save_done(self, task: asyncio.Task[None]) -> None:
+        exc = None if task.cancelled() else task.exception()
+        if exc is not None:
+            self._ratelog("save", "saving the map to %s failed", self.config.state.path, exc=exc)
 
     async def _save(self) -> None:
+        """Save the map (graph, areas, the doorways the tutor confirmed) to ``state.path``."""
+        async with self._save_lock:
+            await self._save_locked()
+
+    async def _save_locked(self) -> None:
         pipeline = self.pipeline
         assert pipeline is not None
-        text = persistence.dumps(pipeline.state_document(meta={"robot": self.robot})) + "\n"
-        self._dirty = False
+        confirmed = frozenset(self.dialogue.confirmed) if self.dialogue is not None else self._saved_confirmed
+        meta = {
+            "robot": self.robot,
+            "confirmed_doorways": sorted(n for n in confirmed if n in pipeline.graph),
+        }
+        gen = self._gen  # the state as of now goes into the file
+        text = persistence.dumps(pipeline.state_document(meta=meta)) + "\n"
         self._last_save = time.monotonic()
+        if self.dialogue is not None and self.concepts is not None:
+            try:  # the concepts first: they hold the area events of this map
+                await self.dialogue.flush_area_events()
+            except Exception as exc:  # the map is saved all the same; the concepts catch up later
+                log.error("handing the area events to the concepts before saving failed: %s", exc)
         try:
             await asyncio.to_thread(atomic_write_text, self.config.state.path, text)
         except OSError as exc:
-            self._dirty = True
             log.error("saving the map to %s failed: %s", self.config.state.path, exc)
             return
+        self._saved_gen = max(self._saved_gen, gen)
+        self._saved_confirmed = confirmed
         self.report.saves += 1
 
     def _tracking_extra(self) -> dict[str, Any]:
@@ -1025,6 +1146,7 @@ class Agent:
         session: zenoh.Session,
     ) -> None:
         try:
+            await self._end_starting()
             await self._stop_laser(tasks)
             # scans still waiting get their odometry (or time out) before anything else stops
             deadline = time.monotonic() + self.config.odometry.max_wait + 2 * TICK
@@ -1045,12 +1167,14 @@ class Agent:
             for sub in (self._intent_sub, self._status_sub, self._camera_sub):
                 if sub is not None:
                     sub.close()
-            await self._close_concepts()
             if self._odom_sub is not None:
                 self._odom_sub.close()
             self.loop.close()
+            if self._save_task is not None:
+                await _cancel(self._save_task, wait_only=True)
             if self.pipeline is not None and (self._dirty or self.pipeline.scans):
-                await self._save()
+                await self._save()  # with the area events handed to the concepts first
+            await self._close_concepts()
             if self.pipeline is not None:
                 self.pipeline.close()  # the tracker's thread, if it has one
             self._compiles.close()

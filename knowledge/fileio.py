@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import tempfile
@@ -36,6 +37,19 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
         Path(tmp).unlink(missing_ok=True)
         raise
     return p
+
+
+def remove_stale_temps(path: str | Path) -> list[Path]:
+    """Remove the temp files :func:`atomic_write_bytes` left beside ``path`` when a process was
+    killed half-way through a write (``.<name>.*.tmp``; the file itself is intact). Call it
+    before writing ``path`` again; returns what was removed."""
+    p = Path(path)
+    removed = []
+    for tmp in p.parent.glob(f".{p.name}.*.tmp"):
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+            removed.append(tmp)
+    return removed
 
 
 def atomic_write_text(path: str | Path, text: str) -> Path:

@@ -68,6 +68,12 @@ BENCHMARKS: list[tuple[str, str, list[str], str]] = [
         "pose tracking in the agent: the per-scan path with the tracker off, inline and on its own thread (target p99 < 5 ms)",
     ),
     (
+        "startup",
+        "tools.bench_startup",
+        [],
+        "a restarted agent's time to answer against its saved map (500-5,000 nodes), vs an empty map",
+    ),
+    (
         "replay",
         "tools.bench_replay",
         [],

@@ -6,7 +6,9 @@ answers every query from a callable returning the current state (a JSON message 
 encoded bytes, or None for "no state yet"). The callable runs on Zenoh's callback thread:
 it must be thread-safe and quick. :class:`StateCell` is such a source: the event loop
 ``set()`` s a new state (validated and encoded once, in the loop), the queryable reads the
-latest bytes.
+latest bytes. A cell without a state answers with an error whose reason is the cell's
+``pending`` (``"no state yet"``, or while the agent starts ``"starting: ..."``): an agent
+still loading its saved map never answers with an empty one.
 
 Every query is finished (``with query:``) on every path, errors included, so a caller's
 ``get()`` returns as soon as the replies are in instead of waiting for its timeout.
@@ -31,6 +33,8 @@ from knowledge.errors import ProtocolError
 log = logging.getLogger(__name__)
 
 StateSource = Callable[[], Mapping[str, Any] | bytes | None]
+#: the error reason of a query for a state not there yet
+NO_STATE = "no state yet"
 
 
 class StateCell:
@@ -38,14 +42,19 @@ class StateCell:
 
     Args:
         schema_id: every state set here must validate as this schema (e.g. ``loci.graph/1``).
+        pending: the error reason a query gets while the cell has no state.
     """
 
-    def __init__(self, schema_id: str, registry: SchemaRegistry = SCHEMAS) -> None:
+    def __init__(
+        self, schema_id: str, registry: SchemaRegistry = SCHEMAS, *, pending: str = NO_STATE
+    ) -> None:
         registry.get(schema_id)
         self.schema_id = schema_id
         self._registry = registry
         self._lock = threading.Lock()
         self._data: bytes | None = None
+        #: why there is no state (the error reason of a query while there is none)
+        self.pending = pending
 
     def set(self, message: Mapping[str, Any]) -> None:
         """Validate, encode and store a new state (raises :class:`ProtocolError` if invalid)."""
@@ -72,8 +81,9 @@ class StateQueryable:
     Replies carry the JSON state with encoding ``application/json;<schema_id>``; a dict from
     the source is validated against ``schema_id`` and encoded, bytes are sent as they are
     (a :class:`StateCell` validated them already). When the source returns None the reply is
-    an error ``loci.error/1`` "no state yet"; when it raises, an error with the reason (and
-    the exception is logged). ``schema_id`` defaults to a :class:`StateCell` source's.
+    an error ``loci.error/1`` "no state yet" (a cell's ``pending`` reason); when it raises,
+    an error with the reason (and the exception is logged). ``schema_id`` defaults to a
+    :class:`StateCell` source's.
     """
 
     def __init__(
@@ -105,9 +115,8 @@ class StateQueryable:
             try:
                 state = self._source()
                 if state is None:
-                    query.reply_err(
-                        _error("no state yet", self.key), encoding=f"{JSON_ENCODING};loci.error/1"
-                    )
+                    reason = str(getattr(self._source, "pending", NO_STATE))
+                    query.reply_err(_error(reason, self.key), encoding=f"{JSON_ENCODING};loci.error/1")
                     return
                 data = state if isinstance(state, bytes) else self._registry.encode(state, self.schema_id)
                 query.reply(self.key, data, encoding=self._encoding)

@@ -34,7 +34,9 @@ After every change of the map (:meth:`DialogueAgent.tick`), false doorways
 (:func:`~knowledge.topology.consistency.false_doorways`) are looked for; a new one is
 asked about ("Was there a door here?", choices yes/no, ``about`` = the finding). "no"
 removes the doorway node (the areas are recomputed, their events go to the concepts);
-"yes" keeps it and it is never asked about again.
+"yes" keeps it and it is never asked about again (:attr:`DialogueAgent.confirmed`, saved with
+the map). Every reply that acknowledges a fact or a change comes after ``commit`` made it
+durable: an agent killed right after its "ok" keeps what it said ok to.
 
 Without the conceptual service (:mod:`agent.conceptual_service`, on with ``[conceptual]``)
 :class:`~agent.conversation.memory.MemoryConcepts` keeps what was said and seen in memory,
@@ -121,6 +123,52 @@ class Concepts(Protocol):
 # ---------------------------------------------------------------------------- the dialogue
 
 
+#: the reply's reason to every intent that comes while the agent loads its saved map
+STARTING = "starting: the saved map and the conceptual map are still loading"
+STARTING_TEXT = "I am just starting and my map is still loading; please say that again in a moment."
+
+
+def raw_intent_ref(payload: bytes) -> tuple[dict[str, Any], str | None] | None:
+    """``({"id", "speaker"}, kind)`` of a raw intent that can be answered (None: it has no
+    usable id, or is too large or deep to look into)."""
+    if len(payload) > SMALL_MESSAGE_BYTES or json_depth(payload) > MAX_JSON_DEPTH:
+        return None
+    try:
+        doc = json.loads(payload)
+    except (ValueError, RecursionError):
+        return None
+    if not isinstance(doc, dict) or not isinstance(doc.get("id"), str) or len(doc["id"]) > 128:
+        return None
+    kind = doc.get("intent") if isinstance(doc.get("intent"), str) else None
+    speaker = doc.get("speaker") if isinstance(doc.get("speaker"), str) else None
+    return {"id": doc["id"], "speaker": speaker}, kind if kind and len(kind) <= 64 else None
+
+
+def starting_reply(payload: bytes, clock: Callable[[], float] = time.time) -> Outgoing | None:
+    """The reply to an intent that came before the agent resumed its map (None: it carries no
+    id to reply to): status ``error``, reason :data:`STARTING`, ``content.starting`` true.
+    Nothing it asked for was done or taken: the sender says it again once the agent is ready
+    (``loci/<robot>/ready/agent``)."""
+    ref = raw_intent_ref(payload)
+    if ref is None:
+        return None
+    intent, kind = ref
+    msg: dict[str, Any] = {
+        "schema": "loci.say/1",
+        "stamp": clock(),
+        "text": STARTING_TEXT,
+        "status": "error",
+        "reason": STARTING,
+        "in_reply_to": intent["id"],
+        "content": {"starting": True},
+    }
+    if intent["speaker"] is not None:
+        msg["to"] = intent["speaker"]
+    if kind is not None:
+        msg["intent"] = kind
+    return Outgoing("dialogue/say", msg)
+
+
 def _norm(words: str) -> str:
     w = " ".join(words.lower().replace("_", " ").split())
     return _ARTICLE.sub("", w)
@@ -184,10 +232,11 @@ class DialogueAgent:
         follow_factory: makes a follow-me controller (``agent.core.follow.FollowMe``); None:
             import ``agent.core.follow`` when asked (an error reply if it is not there).
         people: whether the scans come with people (``[people] enabled``); follow-me needs them.
-        commit: awaited after each change of the concepts and before the reply that
-            acknowledges it: makes the map (graph and areas) the change refers to durable
-            (the runtime saves ``navgraph.json`` if it changed). The concepts store commits
-            its own change in ``submit``.
+        commit: awaited after each change of the concepts or the map and before the reply
+            that acknowledges it (a name, an object, a type, an answer about a door): makes
+            the map (graph, areas and :attr:`confirmed`) the change refers to durable (the
+            runtime saves ``navgraph.json`` if it changed). The concepts store commits its own
+            change in ``submit``.
         on_map_changed: called after the dialogue changed the map, with the edit
             (``{"op": "remove_doorway", "node": 13, "reason": ...}``, a ``loci.map_edit/1`` body
             without its stamps).
@@ -267,24 +316,11 @@ class DialogueAgent:
     def error_for_raw(self, payload: bytes, reason: str) -> Outgoing | None:
         """The error reply to a malformed intent that carries an id (None: it has none)."""
         self.invalid += 1
-        if len(payload) > SMALL_MESSAGE_BYTES or json_depth(payload) > MAX_JSON_DEPTH:
+        ref = raw_intent_ref(payload)
+        if ref is None:
             return None
-        try:
-            doc = json.loads(payload)
-        except (ValueError, RecursionError):
-            return None
-        if not isinstance(doc, dict) or not isinstance(doc.get("id"), str) or len(doc["id"]) > 128:
-            return None
-        kind = doc.get("intent") if isinstance(doc.get("intent"), str) else None
-        fake = {"id": doc["id"], "speaker": doc.get("speaker")}
         self.replies += 1
-        return self.say(
-            fake,
-            kind if kind and len(kind) <= 64 else None,
-            "error",
-            text="I did not understand that.",
-            reason=reason,
-        )
+        return self.say(ref[0], ref[1], "error", text="I did not understand that.", reason=reason)
 
     # ------------------------------------------------------------------ the map
     @property
@@ -453,9 +489,14 @@ class DialogueAgent:
         """Change the concepts; returns once the change and the map it refers to are durable."""
         result = await self.concepts.submit(fn)
         self.concepts.request_reasoning()
+        await self._commit_map()
+        return result
+
+    async def _commit_map(self) -> None:
+        """Make the map (graph, areas, confirmed doorways) durable: awaited before a reply that
+        acknowledges a change of it or a fact about it."""
         if self._commit is not None:
             await self._commit()
-        return result
 
     async def _on_ask_place(self, intent: Mapping[str, Any], args: Mapping[str, Any]) -> list[Outgoing]:
         snap = await self._reasoned_snapshot()
@@ -734,6 +775,7 @@ class DialogueAgent:
         if answer in YES:
             del self.questions[q.id]
             self.confirmed.add(q.node)
+            await self._commit_map()  # the confirmation is saved with the map (never asked again)
             return [self.say(intent, "answer", "ok", content, text="Thank you, I keep the door.")]
         if answer not in NO:
             raise LociError("Please answer yes or no.")
@@ -752,6 +794,7 @@ class DialogueAgent:
                         "reason": f"{q.id}: {intent.get('text') or answer}",
                     }
                 )
+        await self._commit_map()  # the map without the door is on disk before the thanks
         content["area"] = self.area_view(self.current_area())
         out.append(
             self.say(intent, "answer", "ok", content, text="Thank you, I removed the door from my map.")
@@ -762,6 +805,21 @@ class DialogueAgent:
     def on_area_events(self, events: Sequence[AreaEvent]) -> None:
         """The pipeline's area events (queued; :meth:`tick` hands them to the concepts)."""
         self._pending_events.extend(events)
+
+    async def _hand_over_events(self) -> None:
+        if self._pending_events:
+            events, self._pending_events = self._pending_events, []
+            result = self.concepts.apply_area_events(events, self.areas.labels())
+            if inspect.isawaitable(result):
+                await result
+
+    async def flush_area_events(self) -> None:
+        """Hand the queued area events to the concepts now and return once every change handed
+        over so far is committed. The runtime awaits this before it writes the map: the saved
+        concepts are never older than the saved map (a kill between the map's save and the
+        concepts' could leave names on an area the map merged away)."""
+        await self._hand_over_events()
+        await self.concepts.submit(lambda m: None)  # after the changes before it (one owner thread)
 
     def on_base_status(self, status: Mapping[str, Any]) -> list[Outgoing]:
         """A ``loci.base_status/1``: a go-to task reached or failed → its report."""
@@ -881,11 +939,7 @@ class DialogueAgent:
         """Hand queued area events to the concepts, end a finished look-around, and ask about
         false doorways after a map change."""
         out: list[Outgoing] = []
-        if self._pending_events:
-            events, self._pending_events = self._pending_events, []
-            result = self.concepts.apply_area_events(events, self.areas.labels())
-            if inspect.isawaitable(result):
-                await result
+        await self._hand_over_events()
         now = self.clock()
         if self.look is not None:
             # the turn is over and every frame of it is recognised (a frame from after it was

@@ -146,6 +146,14 @@ class ConceptualMap:
             self.path.parent.mkdir(parents=True, exist_ok=True)
         self.world = owlready2.World(filename=str(self.path) if self.path else ":memory:")
         try:
+            if self.path is not None:
+                # durable on commit, against a killed process and a power loss: the rollback
+                # journal (owlready2's default) with a full sync at every commit, said here so
+                # that no SQLite build's default decides it (docs/agent.md)
+                db = self.world.graph.db
+                db.commit()  # a pragma of safety may not change inside the open transaction
+                db.execute("PRAGMA journal_mode = DELETE")
+                db.execute("PRAGMA synchronous = FULL")
             innate = [load_ontology(self.world, ontology or default_ontology_path())]
             innate += [load_ontology(self.world, Path(p)) for p in extra_ontologies]
             self._innate = innate

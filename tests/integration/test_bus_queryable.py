@@ -42,6 +42,17 @@ def test_a_query_gets_the_current_state_at_once() -> None:
     assert elapsed < 2.5  # finished queries return with their replies, not after the 5 s timeout
 
 
+def test_a_cell_still_loading_answers_with_its_pending_reason_never_an_empty_state() -> None:
+    cell = StateCell("loci.graph/1", pending="starting: the saved map is loading")
+    with session_pair() as (a, b), StateQueryable(a, KEYS.state("graph"), cell):
+        settle(b, a)
+        (reply,) = query_state(b, KEYS.state("graph"), timeout=5.0)
+        assert reply.value is None and reply.error == "starting: the saved map is loading"
+        cell.set(_graph(4))
+        (reply,) = query_state(b, KEYS.state("graph"), timeout=5.0)
+    assert reply.error is None and reply.value == _graph(4)
+
+
 def test_a_failing_source_answers_with_an_error_and_keeps_serving() -> None:
     calls = {"n": 0}
 

@@ -20,7 +20,7 @@ from support.dialogue import Clock, World, office
 from support.navigation import drive
 
 from agent.bus.schemas import SCHEMAS
-from agent.conversation.agent import DialogueAgent, Outgoing
+from agent.conversation.agent import DialogueAgent, Outgoing, starting_reply
 from agent.conversation.memory import MemoryConcepts
 from knowledge.navigation.graph import DOORWAY, PLACE, GraphParams, NavigationGraph
 from knowledge.navigation.planning import plan
@@ -186,12 +186,29 @@ def test_a_malformed_intent_gets_an_error_reply_when_it_has_an_id() -> None:
     assert agent.invalid == 3
 
 
+def test_an_intent_before_the_map_is_loaded_gets_a_starting_reply() -> None:
+    payload = json.dumps(intent("assert_name", name="the lab")).encode()
+    out = starting_reply(payload, clock=lambda: 5.0)
+    assert out is not None and out.stream == "dialogue/say"
+    reply = out.message
+    SCHEMAS.validate(reply)
+    assert reply["status"] == "error" and reply["reason"].startswith("starting")
+    assert reply["content"] == {"starting": True} and reply["intent"] == "assert_name"
+    assert reply["in_reply_to"] == json.loads(payload)["id"] and reply["to"] == "tutor"
+    assert starting_reply(b"not json") is None and starting_reply(b'{"intent": "stop"}') is None
+
+
 def test_a_false_doorway_is_asked_about_once_and_no_removes_it() -> None:
     g = NavigationGraph(GraphParams(node_distance=1.0))
     areas = AreaMap()
     world = World(g, areas)
     changed: list[dict[str, Any]] = []
-    agent, _ = agent_for(world, on_map_changed=changed.append)
+    committed: list[bool] = []  # at each commit: is the door still in the graph?
+
+    async def commit() -> None:
+        committed.append(door in g)
+
+    agent, _ = agent_for(world, on_map_changed=changed.append, commit=commit)
     drive(g, [(0.0, 0.0), (6.0, 0.0)], doors=[((3.0, 0.0), 0.0)])
     agent.on_area_events(areas.update(g))
     assert not [o for o in asyncio.run(agent.tick()) if o.stream == "dialogue/ask"]
@@ -212,8 +229,10 @@ def test_a_false_doorway_is_asked_about_once_and_no_removes_it() -> None:
     assert not [o for o in asyncio.run(agent.tick()) if o.stream == "dialogue/ask"]
     reply, _ = handle(agent, intent("answer", answer="maybe", question=ask["id"]))
     assert reply["status"] == "error" and "yes or no" in reply["reason"]
+    committed.clear()
     reply, _ = handle(agent, intent("answer", answer="No"))
     assert reply["status"] == "ok" and reply["content"]["removed"] == door
+    assert committed == [False]  # the map without the door was made durable before the thanks
     assert door not in g and g.doorway_nodes() == [] and len(areas.areas) == 1
     assert changed == [{"op": "remove_doorway", "node": door, "reason": changed[0]["reason"]}]
     assert ask["id"] in changed[0]["reason"]
@@ -225,12 +244,18 @@ def test_a_false_doorway_is_asked_about_once_and_no_removes_it() -> None:
 def test_a_confirmed_doorway_is_kept_and_never_asked_about_again() -> None:
     g = NavigationGraph(GraphParams(node_distance=1.0))
     world = World(g, AreaMap())
-    agent, _ = agent_for(world)
+    committed: list[set[int]] = []  # the confirmed doorways at each commit
+
+    async def commit() -> None:
+        committed.append(set(agent.confirmed))
+
+    agent, _ = agent_for(world, commit=commit)
     drive(g, [(0.0, 0.0), (6.0, 0.0), (6.0, 2.0), (0.0, 2.0), (0.0, 0.0)], doors=[((3.0, 0.0), 0.0)])
     world.areas.update(g)
     (ask,) = [o.message for o in asyncio.run(agent.tick()) if o.stream == "dialogue/ask"]
     reply, _ = handle(agent, intent("answer", answer="yes", question=ask["id"]))
     assert reply["status"] == "ok" and ask["about"]["node"] in g
+    assert committed == [{ask["about"]["node"]}]  # saved (with the map) before the thanks
     g.add_votes(g.place_nodes()[0].id, {"room": 1})
     assert not [o for o in asyncio.run(agent.tick()) if o.stream == "dialogue/ask"]
 

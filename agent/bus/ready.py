@@ -15,7 +15,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 import zenoh
@@ -45,15 +45,33 @@ def ready_roles(session: zenoh.Session, robot: str, timeout: float = 1.0) -> set
 
 
 async def wait_ready(
-    session: zenoh.Session, robot: str, roles: Iterable[str], timeout: float, period: float = 0.25
+    session: zenoh.Session,
+    robot: str,
+    roles: Iterable[str],
+    timeout: float,
+    period: float = 0.25,
+    *,
+    alive: Callable[[], bool] | None = None,
+    waiting: Callable[[set[str], float], None] | None = None,
+    every: float = 30.0,
 ) -> set[str]:
     """Wait until every one of ``roles`` is ready, at most ``timeout`` seconds; returns the
-    roles that are ready (all of them, unless the time ran out)."""
+    roles that are ready (all of them, unless the time ran out or ``alive()`` said no).
+
+    ``waiting(missing, seconds)`` is called every ``every`` seconds while some are missing (a
+    first start on a slow machine compiles its kernels for minutes: say who is still busy).
+    """
     want = set(roles)
-    deadline = time.monotonic() + timeout
+    t0 = time.monotonic()
+    deadline = t0 + timeout
+    said = t0
     seen: set[str] = set()
     while True:
         seen = await asyncio.to_thread(ready_roles, session, robot, min(1.0, max(0.1, period * 2)))
-        if want <= seen or time.monotonic() >= deadline:
+        now = time.monotonic()
+        if want <= seen or now >= deadline or (alive is not None and not alive()):
             return seen
+        if waiting is not None and now - said >= every:
+            said = now
+            waiting(want - seen, now - t0)
         await asyncio.sleep(period)

@@ -57,7 +57,9 @@ class DemoOptions:
     #: matching: [localization] tracking; docs/localization.md)
     odometry: str = "noisy"
     timeouts: TourTimeouts = field(default_factory=TourTimeouts)
-    startup_timeout: float = 120.0
+    #: seconds to wait for every process to say it is ready while all are alive: a first
+    #: start with an empty kernel cache, on half a core, compiles for minutes
+    startup_timeout: float = 900.0
     #: ``[HOST:]PORT`` of the agent's Foxglove live view (None: none)
     foxglove: str | None = None
 
@@ -280,7 +282,17 @@ async def _play(
             screen.status("starting the simulator, the agent (place model, reasoner) and the dialogue ...")
             # every process says when it is ready (a liveliness token, agent/bus/ready.py): the
             # agent once its kernels are compiled and its first scan processed
-            ready = await wait_ready(session, ROBOT, READY_ROLES, opts.startup_timeout)
+            ready = await wait_ready(
+                session,
+                ROBOT,
+                READY_ROLES,
+                opts.startup_timeout,
+                alive=lambda: children.dead() is None,
+                waiting=lambda missing, s: screen.line(
+                    f"[{conv.elapsed():6.1f}s] still starting after {s:.0f} s: the {' and the '.join(sorted(missing))}"
+                    " (a first start compiles the kernels)"
+                ),
+            )
             missing = [r for r in READY_ROLES if r not in ready]
             if children.dead() is not None or missing:
                 raise _failed(children, f"the {' and the '.join(missing) or 'processes'} did not come up")

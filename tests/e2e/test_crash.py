@@ -22,7 +22,7 @@ def test_no_acknowledged_fact_is_lost_and_no_restart_answers_from_an_empty_map(t
     report = run_crashes(4, seed=1, work=tmp_path, modes=("ack", "startup", "ack", "run"))
     summary = {k: v for k, v in report.to_json().items() if k != "kills"}
     assert [k.mode for k in report.kills] == ["ack", "startup", "ack", "run"]
-    assert report.acknowledged >= 4, summary  # the robot took names between the kills
+    assert report.acknowledged >= 2, summary  # each "ack" kill came after an acknowledgement
     assert report.lost == [], summary
     assert report.empty_answers == 0, summary
     assert report.corrupt == [], summary

@@ -303,7 +303,7 @@ def _first_answer(tutor: Tutor, inc: int, timeout: float, agent: AgentRun) -> fl
 
 
 def _check_restart(
-    tutor: Tutor, session: Any, acked: list[tuple[str, Any, float]], state: Path, settle: float = 5.0
+    tutor: Tutor, session: Any, acked: list[tuple[str, Any, float]], state: Path, settle: float = 30.0
 ) -> list[str]:
     """Acknowledged facts the restarted agent does not have.
 

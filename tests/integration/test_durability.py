@@ -29,6 +29,7 @@ from agent.bus.session import BusConfig, bus_session, listening_endpoints
 from knowledge.conceptual import ConceptualMap
 from knowledge.topology import persistence
 from knowledge.topology.areas import AreaMap
+from tools.crash import agent_config
 
 REPO = Path(__file__).resolve().parents[2]
 ROBOT = "durabot"
@@ -63,31 +64,6 @@ class Acks:
             return self.replies[iid]
 
 
-def write_config(tmp_path: Path, endpoint: str) -> Path:
-    path = tmp_path / "robot.toml"
-    path.write_text(
-        f"""
-[robot]
-name = "{ROBOT}"
-
-[bus]
-listen = ["tcp/127.0.0.1:0"]
-connect = ["{endpoint}"]
-
-[laser]
-source = "bus"
-
-[state]
-dir = "{tmp_path / "state"}"
-save_interval = 30.0
-
-[conceptual]
-debounce = 0.5
-"""
-    )
-    return path
-
-
 @pytest.mark.slow
 def test_every_acknowledged_fact_survives_a_sigkill_right_after_the_acknowledgement(tmp_path: Path) -> None:
     graph = small_map()
@@ -103,7 +79,7 @@ def test_every_acknowledged_fact_survives_a_sigkill_right_after_the_acknowledgem
     n = itertools.count(1)
     with bus_session(BusConfig()) as session:
         (endpoint,) = listening_endpoints(session)
-        config = write_config(tmp_path, endpoint)
+        config = agent_config(tmp_path, endpoint, ROBOT)
         acks = Acks(session)
         intents = publish_stream(session, ROBOT, "dialogue/intent")
         for cycle in range(2):

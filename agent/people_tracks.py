@@ -229,7 +229,9 @@ def recording_scans(
         posed.append((m.scan, (float(sensor[0]), float(sensor[1]), float(sensor[2]))))
 
     # the agent's own sensor loop, so the tracks see the scans and poses a replay does
-    loop = SensorLoop(recorded_sync_params(meta) or SyncParams(reorder=FOREIGN_REORDER), step)
+    loop = SensorLoop(
+        recorded_sync_params(meta) or SyncParams(reorder=FOREIGN_REORDER), step, max_rate=params.max_rate
+    )
     for message in feed:
         loop.feed(message)
         yield from posed

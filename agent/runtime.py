@@ -39,7 +39,9 @@ the **recorder** task. Both sensor tasks feed the one sensor loop
 the odometry association releases goes at once, synchronously (a few ms), through the
 :class:`~agent.core.pipeline.Pipeline` and out on the bus, in stamp order. Before a scan
 enters the loop, the odometry already queued is taken first, so arrival order is kept across
-the two streams. The warm-up compiles every kernel before the laser opens
+the two streams. A sensor task yields to the loop after each scan, so with a backlog (a
+slow or busy computer) the recorder, the dialogue's answers and the base's status still get
+their turn between two scans instead of waiting until the backlog is worked off. The warm-up compiles every kernel before the laser opens
 (:mod:`agent.core.warmup`); the agent declares itself ready (``loci/<robot>/ready/agent``)
 once its first scan is processed.
 
@@ -136,6 +138,13 @@ TICK = 0.05
 RECORD_GRACE = 0.3
 
 
+async def _take_turns() -> None:
+    """Let the loop's other tasks run once: a sensor task with a backlog (a driver queue or a
+    subscription that always has the next item ready) would otherwise never yield, and the
+    recorder, the dialogue's answers and the base's status would wait until it caught up."""
+    await asyncio.sleep(0)
+
+
 def _timed(codec: Codec[T]) -> Callable[[RawSample], tuple[float, T]]:
     """A subscription decoder keeping the arrival time (seconds since the epoch)."""
 
@@ -181,6 +190,7 @@ class AgentReport:
     robot: str
     scans_fed: int = 0
     scans_processed: int = 0
+    scans_over_rate: int = 0  # left out by ``[laser] max_rate`` (a rule on stamps, not a loss)
     errors: int = 0
     restarts: dict[str, int] = field(default_factory=dict)  # failures by task (each logged, restarted)
     drops: dict[str, int] = field(default_factory=dict)
@@ -225,7 +235,13 @@ class Agent:
         self.params = PipelineParams.from_config(config)
         #: the one sensor loop (agent/core/sensor_loop.py): scans with their odometry, in stamp
         #: order, through :meth:`_step`
-        self.loop = SensorLoop(OdomSync(config.odometry.sync), self._step, on_error=self._step_failed)
+        self.loop = SensorLoop(
+            OdomSync(config.odometry.sync),
+            self._step,
+            on_error=self._step_failed,
+            max_rate=config.laser.max_rate,
+            observe=self._observe,
+        )
         self.sync = self.loop.sync
         self.report = AgentReport(self.robot)
         self.restarts = Restarts()
@@ -645,6 +661,7 @@ class Agent:
             while True:
                 for recv, pose in await self._odom_sub.recv_batch(SENSOR_QUEUE):
                     self.loop.odom(pose, recv)
+                await _take_turns()
 
     async def _lms_task(self) -> None:
         pub = self._pubs["scan"]
@@ -654,6 +671,7 @@ class Agent:
             pub.put_bytes(data)
             # the bytes just published, decoded: the pipeline sees exactly what is recorded
             self._feed_scan(decode_laser_scan(data), now)
+            await _take_turns()
 
     async def _recording_task(self) -> None:
         """``[laser] source = "recording"``: the file's scans and odometry, paced, through the
@@ -677,6 +695,7 @@ class Agent:
                 assert isinstance(msg.value, LaserScan)
                 pub_scan.put_bytes(LASER_SCAN_CODEC.encode(msg.value))
                 self._feed_scan(msg.value, msg.arrival)
+                await _take_turns()
         log.info(
             "the recording ended: %d scans, %d odometry messages (%d invalid)%s",
             feed.scans,
@@ -691,6 +710,7 @@ class Agent:
             while True:
                 for recv, scan in await self._scan_sub.recv_batch(SENSOR_QUEUE):
                     self._feed_scan(scan, recv)
+                    await _take_turns()
 
     async def _housekeeping_task(self) -> None:
         interval = self.config.state.save_interval
@@ -719,6 +739,11 @@ class Agent:
                         self.live.on_concepts(self.concepts.snapshot() if self.concepts is not None else None)
 
     # ------------------------------------------------------------------ per scan
+    def _observe(self, m: Matched) -> None:
+        """A scan left out by ``[laser] max_rate``: people, local map and doorways only."""
+        assert self.pipeline is not None
+        self.pipeline.observe(m.scan, m.pose)
+
     def _step(self, m: Matched) -> None:
         """One scan through the pipeline and out on the bus (the sensor loop's step)."""
         pipeline = self.pipeline
@@ -1117,7 +1142,11 @@ class Agent:
     def _extra(self) -> dict[str, Any]:
         pipeline = self.pipeline
         out: dict[str, Any] = {
-            "scans": {"fed": self.report.scans_fed, "processed": pipeline.scans if pipeline else 0},
+            "scans": {
+                "fed": self.report.scans_fed,
+                "processed": pipeline.scans if pipeline else 0,
+                "over_rate": self.loop.over_rate,
+            },
             "sync": self.sync.stats.as_dict(),
             "latency_ms": {"process": _percentiles(self._process_ms), "age": _percentiles(self._age_ms)},
             **self._tracking_extra(),
@@ -1222,6 +1251,7 @@ class Agent:
         s = self.sync.stats
         r.scans_processed = self.pipeline.scans if self.pipeline else 0
         r.errors = self.loop.errors
+        r.scans_over_rate = self.loop.over_rate
         r.restarts = self.restarts.as_dict()
         r.drops = {
             "driver": self._lms.stats.dropped + self._lms.dropped if self._lms is not None else 0,

@@ -48,6 +48,11 @@ scan's stamp (:mod:`agent.core.odom_sync`) and runs, in this order:
    doorway nodes;
 6. the topological areas (Sect. 7.2.3) and their change events.
 
+``Pipeline.observe(scan, pose)`` takes a scan left out by ``max_rate`` (``[laser]
+max_rate``, applied by the sensor loop by the scans' stamps): only 1a, the local map of 2 and
+4 run, with the correction the last processed scan was given; a doorway 4 reports there goes
+into the graph with the next processed scan.
+
 The result depends only on the sequence of ``(scan, pose)`` inputs (and the model and
 parameters): a live run and a replay of its recording build the same graph.
 
@@ -202,6 +207,10 @@ class PipelineParams:
             with this time constant, small changes only (0: the tracker's as it is; see
             :meth:`Pipeline.correction`).
         places: the HMM filter of the place labels and which label votes.
+        max_rate: scans per second the chain processes at most (``[laser] max_rate``; 0:
+            every scan). Applied by the sensor loop before :meth:`Pipeline.process`, by the
+            scans' stamps (:class:`~agent.core.sensor_loop.SensorLoop`); kept here because
+            the result depends on it, so a replay leaves out the scans the robot left out.
     """
 
     mount: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -214,8 +223,11 @@ class PipelineParams:
     places: PlaceFilterParams = field(default_factory=PlaceFilterParams)
     tracking_lag: int = 0
     tracking_smoothing: float = 0.0
+    max_rate: float = 0.0
 
     def __post_init__(self) -> None:
+        if isinstance(self.max_rate, bool) or not (math.isfinite(self.max_rate) and self.max_rate >= 0):
+            raise ValueError(f"max_rate must be scans per second >= 0 (0: every scan), got {self.max_rate!r}")
         if (
             isinstance(self.tracking_lag, bool)
             or not isinstance(self.tracking_lag, int)
@@ -246,6 +258,7 @@ class PipelineParams:
             places=PlaceFilterParams(hmm=config.places.hmm, vote=config.places.vote),
             tracking_lag=config.localization.lag if config.localization.tracking else 0,
             tracking_smoothing=config.localization.smoothing if config.localization.tracking else 0.0,
+            max_rate=config.laser.max_rate,
         )
 
     def to_table(self) -> dict[str, Any]:
@@ -257,6 +270,8 @@ class PipelineParams:
                 extra["tracking_lag"] = self.tracking_lag
             if self.tracking_smoothing:  # absent: not smoothed (older recordings)
                 extra["tracking_smoothing"] = self.tracking_smoothing
+        if self.max_rate:  # absent: every scan (older recordings)
+            extra["max_rate"] = self.max_rate
         return extra | {
             "mount": list(self.mount),
             "local_map": dataclass_table(self.local_map),
@@ -281,6 +296,7 @@ class PipelineParams:
             *("mount", "local_map", "rear_beams", "graph", "doorways", "people", "localization", "places"),
             "tracking_lag",
             "tracking_smoothing",
+            "max_rate",
         }
         unknown = sorted(set(table) - known)
         if unknown:
@@ -302,6 +318,7 @@ class PipelineParams:
             places=build_dataclass(PlaceFilterParams, table.get("places", {"hmm": False}), "places"),
             tracking_lag=_lag_from(table.get("tracking_lag", 0)),
             tracking_smoothing=_smoothing_from(table.get("tracking_smoothing", 0.0)),
+            max_rate=_rate_from(table.get("max_rate", 0.0)),
         )
 
 
@@ -437,7 +454,10 @@ class Pipeline:
         self.areas = areas if areas is not None else AreaMap()
         self.areas.update(self.graph)
         self.scans = 0
+        #: over-rate scans seen by :meth:`observe` (people, local map, doorways only)
+        self.observed = 0
         self.last_stamp: float | None = None
+        self._pending_doorway: Doorway | None = None
         self._angles: tuple[tuple[int, float, float], np.ndarray] | None = None
         loc = self.params.localization
         self.tracker: PoseTracker | None = PoseTracker(loc) if loc is not None else None
@@ -546,17 +566,100 @@ class Pipeline:
             self._angles = (key, scan.angles)
         return self._angles[1]
 
+    def _check_order(self, scan: LaserScan) -> None:
+        if self.last_stamp is not None and scan.stamp < self.last_stamp:
+            raise ValueError(
+                f"scan stamps must not go back in time ({scan.stamp} after {self.last_stamp}); "
+                "associate scans with odometry through agent.core.odom_sync.OdomSync"
+            )
+
+    def _masked(
+        self, scan: LaserScan, frame: PeopleFrame | None, angles: np.ndarray, sensor: np.ndarray, full: bool
+    ) -> tuple[np.ndarray | None, np.ndarray, np.ndarray, np.ndarray]:
+        """The people mask and the ranges each consumer gets: ``(mask, classifier's, local
+        map's, doorway detector's)`` (all the raw ranges when nobody walks in the scan)."""
+        raw = scan.ranges
+        if self.people is None or not self.params.people.mask:
+            return None, raw, raw, raw
+        assert frame is not None
+        pp = self.params.people
+        walking = None
+        if pp.min_travel is not None:
+            self._static.update(
+                beam_endpoints(raw, angles, sensor, range_max=scan.range_max, range_min=scan.range_min),
+                scan.stamp,
+            )
+            walking = tracked_legs(
+                frame.detection,
+                frame.legs,
+                frame.tracks,
+                min_travel=pp.min_travel,
+                standing=self._static.static(frame.legs) if frame.legs.shape[0] else None,
+            )
+        m = person_beams(frame.detection, margin=pp.margin, clearance=pp.clearance or None, persons=walking)
+        if not m.any():
+            return None, raw, raw, raw
+        cls_r = fill_masked(
+            raw,
+            m,
+            range_max=scan.range_max,
+            range_min=scan.range_min,
+            circular=full,
+            angle_min=scan.angle_min,
+            angle_increment=scan.angle_increment,
+        )
+        map_r = unknown_masked(raw, m)
+        door_r = {"unknown": map_r, "raw": raw, "filled": cls_r}[pp.doorways]
+        return m, cls_r, map_r, door_r
+
+    def _doorway_points(
+        self, scan: LaserScan, map_r: np.ndarray, door_r: np.ndarray, angles: np.ndarray, sensor: np.ndarray
+    ) -> np.ndarray:
+        """The obstacle points the doorway detector sees (robot frame): a 360° scan's own, a
+        front laser's local map after this scan went in."""
+        if is_full_turn(scan):
+            return scan_points(door_r, angles, range_max=scan.range_max, range_min=scan.range_min)
+        self.local_map.add(
+            map_r, angles, sensor, stamp=scan.stamp, range_max=scan.range_max, range_min=scan.range_min
+        )
+        return self.local_map.points_in_robot_frame(sensor)
+
+    def observe(self, scan: LaserScan, pose: Pose2D) -> None:
+        """A scan left out by ``max_rate``: only what needs every scan sees it — the people
+        tracker, the local map and the doorway detector (whose opening a robot may pass
+        between two processed scans, and whose walls beyond the jambs the local map holds
+        from many viewpoints). No classification, no tracking (the pose has the correction
+        the last processed scan was given), no graph update, nothing published; a doorway
+        reported here goes into the graph with the next processed scan.
+
+        Raises:
+            ValueError: the scan is older than the previous one.
+        """
+        self._check_order(scan)
+        sensor = compose(pose, self.params.mount)
+        if self.tracker is not None:
+            sensor = se2_compose(self._applied, sensor)
+        angles = self._beam_angles(scan)
+        frame = None
+        if self.people is not None:
+            frame = self.people.process_scan(
+                scan, sensor_pose=(float(sensor[0]), float(sensor[1]), float(sensor[2]))
+            )
+        _, _, map_r, door_r = self._masked(scan, frame, angles, sensor, is_full_turn(scan))
+        points = self._doorway_points(scan, map_r, door_r, angles, sensor)
+        doorway = self.detector.update(points, sensor, scan.stamp)
+        if doorway is not None:
+            self._pending_doorway = doorway
+        self.observed += 1
+        self.last_stamp = scan.stamp
+
     def process(self, scan: LaserScan, pose: Pose2D) -> StepResult:
         """Run the chain on one scan and the robot's odometry pose at its stamp.
 
         Raises:
             ValueError: the scan is older than the previous one (scans must come in stamp order).
         """
-        if self.last_stamp is not None and scan.stamp < self.last_stamp:
-            raise ValueError(
-                f"scan stamps must not go back in time ({scan.stamp} after {self.last_stamp}); "
-                "associate scans with odometry through agent.core.odom_sync.OdomSync"
-            )
+        self._check_order(scan)
         sensor = compose(pose, self.params.mount)
         angles = self._beam_angles(scan)
         correction = None
@@ -568,9 +671,7 @@ class Pipeline:
         fsp = self.params.rear_beams
         full = is_full_turn(scan)
         frame: PeopleFrame | None = None
-        mask: np.ndarray | None = None
         raw = scan.ranges
-        cls_r = map_r = door_r = raw
         if self.people is not None:
             frame = self.people.process_scan(
                 scan, sensor_pose=(float(sensor[0]), float(sensor[1]), float(sensor[2]))
@@ -586,55 +687,13 @@ class Pipeline:
                 if legs.any():
                     track_r = np.where(legs, np.nan, raw).astype(raw.dtype, copy=False)
             sensor, correction = self._track(scan, track_r, angles, odom_sensor, sensor)
-        if self.people is not None:
-            assert frame is not None
-            pp = self.params.people
-            if pp.mask:
-                walking = None
-                if pp.min_travel is not None:
-                    self._static.update(
-                        beam_endpoints(
-                            raw, angles, sensor, range_max=scan.range_max, range_min=scan.range_min
-                        ),
-                        scan.stamp,
-                    )
-                    walking = tracked_legs(
-                        frame.detection,
-                        frame.legs,
-                        frame.tracks,
-                        min_travel=pp.min_travel,
-                        standing=self._static.static(frame.legs) if frame.legs.shape[0] else None,
-                    )
-                m = person_beams(
-                    frame.detection, margin=pp.margin, clearance=pp.clearance or None, persons=walking
-                )
-                if m.any():
-                    mask = m
-                    cls_r = fill_masked(
-                        raw,
-                        m,
-                        range_max=scan.range_max,
-                        range_min=scan.range_min,
-                        circular=full,
-                        angle_min=scan.angle_min,
-                        angle_increment=scan.angle_increment,
-                    )
-                    map_r = unknown_masked(raw, m)
-                    door_r = {"unknown": map_r, "raw": raw, "filled": cls_r}[pp.doorways]
+        mask, cls_r, map_r, door_r = self._masked(scan, frame, angles, sensor, full)
+        points = self._doorway_points(scan, map_r, door_r, angles, sensor)
         if full:
             ranges, known = assemble_scan(
                 cls_r, angles, range_max=scan.range_max, params=fsp, range_min=scan.range_min
             )
-            points = scan_points(door_r, angles, range_max=scan.range_max, range_min=scan.range_min)
         else:
-            self.local_map.add(
-                map_r,
-                angles,
-                sensor,
-                stamp=scan.stamp,
-                range_max=scan.range_max,
-                range_min=scan.range_min,
-            )
             ranges, known = assemble_scan(
                 cls_r,
                 angles,
@@ -644,7 +703,6 @@ class Pipeline:
                 params=fsp,
                 range_min=scan.range_min,
             )
-            points = self.local_map.points_in_robot_frame(sensor)
         proba = np.clip(self.model.predict_proba_scans(ranges)[0], 0.0, 1.0)
         coverage = float(known.mean())
         belief: np.ndarray | None = None
@@ -660,6 +718,9 @@ class Pipeline:
         voted = belief if belief is not None and use_belief else proba
         label = self.classes[int(np.argmax(voted))]
         doorway = self.detector.update(points, sensor, scan.stamp)
+        if doorway is None:  # one left between two processed scans (two cannot be: see observe)
+            doorway = self._pending_doorway
+        self._pending_doorway = None
         in_opening = self.detector.passing
         upd = self.graph.update(
             sensor, label, doorway, in_opening=in_opening, ranges=ranges, coverage=coverage, known=known
@@ -760,6 +821,18 @@ def _smoothing_from(value: Any) -> float:
         raise ConfigError(
             f"pipeline parameters: tracking_smoothing must be seconds in [0, 10], got {value!r}"
         )
+    return float(value)
+
+
+def _rate_from(value: Any) -> float:
+    from knowledge.errors import ConfigError
+
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int | float)
+        or not (math.isfinite(value) and value >= 0)
+    ):
+        raise ConfigError(f"pipeline parameters: max_rate must be scans per second >= 0, got {value!r}")
     return float(value)
 
 

@@ -7,8 +7,9 @@ tracked over a recording (``loci people track``), the benchmarks — feeds the s
 ``LogReader`` alike. So what a replay measures is what the robot ran: the association of
 scans with odometry (:class:`~agent.core.odom_sync.OdomSync`, by stamps; the arrival times
 decide only the timeouts, and a recording carries them), the order (stamp order), what is
-dropped and why (counted by the association, never by timing), and what a failing step
-costs (that scan only, counted).
+dropped and why (counted by the association, never by timing), which scans a slow computer
+leaves out (``max_rate``: a rule on the scans' stamps, the same at any speed, counted
+``over_rate``), and what a failing step costs (that scan only, counted).
 
 Sources give :class:`SensorMessage` s in arrival order: the live runtime from its driver
 thread and bus subscriptions, a recording from its file
@@ -21,6 +22,7 @@ result).
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -31,6 +33,11 @@ from drivers.messages import LaserScan, Pose2D
 __all__ = ["SensorLoop", "SensorMessage"]
 
 log = logging.getLogger(__name__)
+
+#: ``max_rate``'s tolerance: a scan is stepped when this fraction of ``1 / max_rate`` passed
+#: since the last one (stamps jitter; 0.9 keeps every second scan of an LMS at 37.5 Hz with a
+#: limit of 20 Hz while the stamps jitter by up to 5 ms).
+RATE_SLACK = 0.9
 
 #: The kinds of :class:`SensorMessage`.
 KINDS = ("scan", "odom")
@@ -55,6 +62,14 @@ class SensorLoop:
         on_error: called with the scan and the exception when ``step`` raises (the scan is
             skipped and counted in :attr:`errors`; default: logged, the first few with their
             traceback).
+        max_rate: scans per second stepped at most (0: every scan). A matched scan is
+            stepped when its stamp is at least ``RATE_SLACK / max_rate`` seconds after the
+            last stepped scan's, else left out (counted in :attr:`over_rate`): an LMS at 37.5 Hz
+            with ``max_rate = 20`` gives every second scan. The rule reads stamps only, so a
+            replay at any speed and the live robot on any computer step the same scans.
+        observe: called with each scan left out by ``max_rate`` instead of ``step`` (the
+            pipeline's cheap part that needs every scan: ``Pipeline.observe``); a failure
+            there is handled as one in ``step``.
     """
 
     def __init__(
@@ -63,15 +78,25 @@ class SensorLoop:
         step: Callable[[Matched], Any],
         *,
         on_error: Callable[[Matched, Exception], None] | None = None,
+        max_rate: float = 0.0,
+        observe: Callable[[Matched], Any] | None = None,
     ) -> None:
+        if isinstance(max_rate, bool) or not (math.isfinite(max_rate) and max_rate >= 0):
+            raise ValueError(f"max_rate must be scans per second >= 0 (0: every scan), got {max_rate!r}")
         self.sync = sync if isinstance(sync, OdomSync) else OdomSync(sync)
         self.step = step
         self.on_error = on_error
+        self.max_rate = float(max_rate)
+        self.observe = observe
+        self._min_interval = RATE_SLACK / self.max_rate if self.max_rate else 0.0
+        self._last_stamp: float | None = None
         #: scans and odometry poses fed; scans stepped; steps that raised
         self.scans = 0
         self.odometry = 0
         self.processed = 0
         self.errors = 0
+        #: scans left out by ``max_rate``
+        self.over_rate = 0
 
     # ------------------------------------------------------------------ input
     def feed(self, message: SensorMessage) -> int:
@@ -109,9 +134,20 @@ class SensorLoop:
 
     # ------------------------------------------------------------------ steps
     def _run(self, matched: list[Matched]) -> int:
+        stepped = 0
         for m in matched:
+            last = self._last_stamp
+            over = bool(self._min_interval) and last is not None and m.scan.stamp - last < self._min_interval
+            handler = self.observe if over else self.step
+            if over:
+                self.over_rate += 1
+            else:
+                self._last_stamp = m.scan.stamp
+                stepped += 1
+            if handler is None:
+                continue
             try:
-                self.step(m)
+                handler(m)
             except Exception as exc:  # a bug or a strange scan: that scan is skipped, counted
                 self.errors += 1
                 if self.on_error is not None:
@@ -121,5 +157,6 @@ class SensorLoop:
                         "processing scan %d (stamp %.3f) failed; it is skipped", m.scan.seq, m.scan.stamp
                     )
                 continue
-            self.processed += 1
-        return len(matched)
+            if not over:
+                self.processed += 1
+        return stepped

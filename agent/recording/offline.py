@@ -61,6 +61,7 @@ class ReplayOutcome:
         messages: scan and odometry messages read; scans, odometry: of each kind.
         invalid_scans, invalid_odometry: those that did not decode.
         skipped: scans after the live run's last one (see the module docstring).
+        over_rate: scans left out by the recorded ``max_rate`` (as the robot left them out).
         errors: scans whose processing raised (logged; the scan is skipped, as live).
         truncated: the file ended without its footer (the writer crashed).
         cut: the replay stopped at its ``duration``, before the end of the file.
@@ -76,6 +77,7 @@ class ReplayOutcome:
     invalid_scans: int = 0
     invalid_odometry: int = 0
     skipped: int = 0
+    over_rate: int = 0
     errors: int = 0
     edits: int = 0
     edits_failed: int = 0
@@ -104,6 +106,7 @@ class ReplayOutcome:
         """Where every scan went; ``balanced`` says that the parts add up to ``scans``."""
         dropped = self.dropped()
         parts = self.processed + self.errors + sum(dropped.values()) + self.invalid_scans + self.skipped
+        parts += self.over_rate
         return {
             "scans": self.scans,
             "processed": self.processed,
@@ -111,6 +114,7 @@ class ReplayOutcome:
             "dropped": dropped,
             "invalid": self.invalid_scans,
             "skipped": self.skipped,
+            "over_rate": self.over_rate,
             "balanced": parts == self.scans,
         }
 
@@ -123,6 +127,7 @@ class ReplayOutcome:
             "invalid_scans": self.invalid_scans,
             "invalid_odometry": self.invalid_odometry,
             "skipped": self.skipped,
+            "over_rate": self.over_rate,
             "errors": self.errors,
             "edits": self.edits,
             "edits_failed": self.edits_failed,
@@ -326,7 +331,10 @@ def replay_recording(
         if on_step is not None:
             on_step(result)
 
-    loop = SensorLoop(sync, step)
+    def observe(m: Any) -> None:
+        pipeline.observe(m.scan, m.pose)
+
+    loop = SensorLoop(sync, step, max_rate=params.max_rate, observe=observe)
     try:
         for message in feed:
             loop.feed(message)
@@ -348,6 +356,7 @@ def replay_recording(
     out.invalid_odometry = feed.invalid_odometry
     out.skipped = feed.skipped
     out.errors = loop.errors
+    out.over_rate = loop.over_rate
     out.truncated = feed.truncated
     out.cut = feed.cut
     out.sync = loop.sync.stats.as_dict()

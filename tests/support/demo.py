@@ -43,10 +43,17 @@ def play_demo(out: Path, seed: int, *args: str) -> tuple[dict[str, Any], subproc
 
 
 def play_demos(
-    runs: list[tuple[Path, int]], *args: str, busy: bool = True
+    runs: list[tuple[Path, int]], *args: str, busy: bool = True, at_once: bool = True
 ) -> list[tuple[dict[str, Any], subprocess.CompletedProcess[str]]]:
-    """Several tours at once (``(out, seed)`` each), beside a busy core unless ``busy`` is False."""
+    """Several tours (``(out, seed)`` each), at once or one after the other, beside a busy core
+    unless ``busy`` is False."""
+    done = []
     with busy_core() if busy else contextlib.nullcontext():
+        if not at_once:
+            for out, seed in runs:
+                proc = subprocess.run(_command(out, seed, args), capture_output=True, text=True, timeout=900)
+                done.append((out, proc))
+            return [(_summary(out, proc), proc) for out, proc in done]
         procs = [
             (
                 out,
@@ -56,7 +63,6 @@ def play_demos(
             )
             for out, seed in runs
         ]
-        done = []
         for out, p in procs:
             stdout, stderr = p.communicate(timeout=900)
             done.append((out, subprocess.CompletedProcess(p.args, p.returncode, stdout, stderr)))

@@ -99,6 +99,7 @@ def test_a_truncated_recording_replays_up_to_its_last_complete_message(
         "dropped": {"unfinished": len(scans) - n} if len(scans) > n else {},
         "invalid": 0,
         "skipped": 0,
+        "over_rate": 0,
         "balanced": True,
     }
     assert got["stats"]["processed"] == n

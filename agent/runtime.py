@@ -41,9 +41,11 @@ the odometry association releases goes at once, synchronously (a few ms), throug
 enters the loop, the odometry already queued is taken first, so arrival order is kept across
 the two streams. A sensor task yields to the loop after each scan, so with a backlog (a
 slow or busy computer) the recorder, the dialogue's answers and the base's status still get
-their turn between two scans instead of waiting until the backlog is worked off. The warm-up compiles every kernel before the laser opens
-(:mod:`agent.core.warmup`); the agent declares itself ready (``loci/<robot>/ready/agent``)
-once its first scan is processed.
+their turn between two scans instead of waiting until the backlog is worked off. With
+``[laser] max_rate`` the loop runs the whole chain on at most that many scans a second, by
+their stamps, and the others through ``Pipeline.observe`` only (people, local map, doorways).
+The warm-up compiles every kernel before the laser opens (:mod:`agent.core.warmup`); the
+agent declares itself ready (``loci/<robot>/ready/agent``) once its first scan is processed.
 
 Queues: the driver thread keeps ``laser.queue_size`` scans read and not yet processed
 (about 7 s; drop-oldest beyond, counted ``driver``); the bus subscriptions keep 256 samples

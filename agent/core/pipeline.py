@@ -718,7 +718,9 @@ class Pipeline:
         voted = belief if belief is not None and use_belief else proba
         label = self.classes[int(np.argmax(voted))]
         doorway = self.detector.update(points, sensor, scan.stamp)
-        if doorway is None:  # one left between two processed scans (two cannot be: see observe)
+        if doorway is None:
+            # one left between two processed scans; two would need the robot to leave two
+            # openings within 1 / max_rate s
             doorway = self._pending_doorway
         self._pending_doorway = None
         in_opening = self.detector.passing

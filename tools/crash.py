@@ -366,6 +366,7 @@ def run_crashes(
     A ``startup`` kill before any start was measured waits for the first answer instead.
     """
     from agent.bus.session import BusConfig, bus_session, listening_endpoints
+    from agent.demo.processes import stop_process
 
     rng = random.Random(seed)
     work.mkdir(parents=True, exist_ok=True)
@@ -447,11 +448,7 @@ def run_crashes(
             final_lost = _check_final(work / "state", tutor.acked)
         finally:
             tutor.close()
-            sim.send_signal(signal.SIGTERM)
-            try:
-                sim.wait(30)
-            except subprocess.TimeoutExpired:
-                sim.kill()
+            stop_process(sim, signal.SIGTERM, 30.0)
             sim_log.close()
     lost_all = sorted({x for kill in results for x in kill.lost} | set(final_lost))
     kinds = [kind for kind, _, _ in tutor.acked]

@@ -16,8 +16,9 @@ import sys
 import time
 from pathlib import Path
 from types import TracebackType
+from typing import Any
 
-__all__ = ["Child", "Children", "free_port"]
+__all__ = ["Child", "Children", "free_port", "stop_process"]
 
 
 def free_port() -> int:
@@ -66,18 +67,25 @@ class Child:
     def stop(self, grace: float = 10.0) -> int | None:
         """SIGINT, wait ``grace`` seconds, then SIGKILL; returns the exit status."""
         try:
-            if self.proc.poll() is None:
-                with contextlib.suppress(ProcessLookupError):
-                    self.proc.send_signal(signal.SIGINT)
-                try:
-                    self.proc.wait(grace)
-                except subprocess.TimeoutExpired:
-                    with contextlib.suppress(ProcessLookupError):
-                        self.proc.kill()
-                    self.proc.wait(5.0)
-            return self.proc.returncode
+            return stop_process(self.proc, signal.SIGINT, grace)
         finally:
             self._out.close()
+
+
+def stop_process(proc: subprocess.Popen[Any], sig: int = signal.SIGINT, grace: float = 10.0) -> int | None:
+    """Ask a child to stop with ``sig``, wait ``grace`` seconds, then SIGKILL it; its exit
+    status (a child that already ended is left as it is). The child's output must not be a
+    pipe nobody reads (it could block on it while we wait)."""
+    if proc.poll() is None:
+        with contextlib.suppress(ProcessLookupError):
+            proc.send_signal(sig)
+        try:
+            proc.wait(grace)
+        except subprocess.TimeoutExpired:
+            with contextlib.suppress(ProcessLookupError):
+                proc.kill()
+            proc.wait(5.0)
+    return proc.returncode
 
 
 class Children:

@@ -11,9 +11,10 @@ STAMP := $(VENV)/.installed-dev
 BENCH_STAMP := $(VENV)/.installed-bench
 EVAL_STAMP := $(VENV)/.installed-eval
 OUT ?= out
-# test processes (pytest-xdist; one test file per worker at a time); TEST_WORKERS=0 runs in one process
+# test processes (pytest-xdist; one test file per worker at a time, in the order tests/conftest.py
+# gives: the longest first); TEST_WORKERS=0 runs in one process
 TEST_WORKERS ?= 2
-PYTEST := $(BIN)/pytest -n $(TEST_WORKERS) --dist loadfile --durations=15
+PYTEST := $(BIN)/pytest -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder --durations=15
 
 .PHONY: help install demo test lint typecheck unit integration quick eval bench fuzz default-models clean check-tours
 

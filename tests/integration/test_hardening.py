@@ -63,7 +63,7 @@ def jpeg_claiming(width: int, height: int) -> bytes:
 
 
 def a_frame(seq: int, jpeg: bytes) -> CameraFrame:
-    # stamped 0.6 s apart: a look around recognises a frame every 0.5 s of stamps
+    # stamped 0.6 s apart: a look around recognises a frame every LOOK_FRAME_INTERVAL (0.25 s) of stamps
     return CameraFrame(stamp=time.time() + 0.6 * seq, seq=seq, frame_id="camera", jpeg=jpeg)
 
 

@@ -28,6 +28,7 @@ COMMAND_MODULES: list[str] = [
     "agent.commands.replay",
     "agent.commands.evaluate",
     "agent.commands.localize",
+    "agent.commands.map",
     "agent.commands.dialogue",
     "agent.commands.objects",
 ]

@@ -3,10 +3,10 @@
 ``await Agent(config).run(stop)`` (``loci run``) does, in order:
 
 1. open the Zenoh session (closed in ``finally``, whatever happens) and declare the queryables
-   ``state/graph``, ``state/areas``, ``state/place`` (``state/concepts``) and the intent
-   subscription: until step 3 is done every query is answered with the error ``starting``
-   and every intent with a "starting" reply (nothing is taken; an agent that restarts never
-   answers from an empty map);
+   ``state/graph``, ``state/areas``, ``state/place`` (``state/concepts``), ``map/save`` and
+   the intent subscription: until step 3 is done every query is answered with the error
+   ``starting`` (``map/save``: "no map yet") and every intent with a "starting" reply
+   (nothing is taken; an agent that restarts never answers from an empty map);
 2. load the place model and, unless ``state.resume`` is off, the persisted graph
    (``<state.dir>/navgraph.json``, with the doorways the tutor confirmed); compile the
    pipeline's kernels (a throwaway run);
@@ -53,6 +53,11 @@ each (drop-oldest, counted); the recorder waits (bounded). An agent that falls b
 busy machine) processes every scan later rather than fewer of them, so its result does not
 depend on its speed; only one more than these queues behind loses scans, and the diagnostics
 and the final report say so.
+
+Each processed scan is also integrated into the occupancy map of the run (at the pose the
+pipeline gave it, :mod:`agent.core.map_files`), which a ``map/save`` request
+(``loci.map_save/1``, ``loci map save``) writes as map_server YAML + PGM with its label image
+into the folder it names; the files are written off the loop.
 
 Published per processed scan: ``place`` (``loci.place/1``), ``tf`` (odom → laser; map →
 laser with ``[localization]`` tracking, which also publishes ``tf/map``, map → odom),
@@ -104,8 +109,8 @@ from agent.bus.codecs import (
     frame_transform,
 )
 from agent.bus.diagnostics import diagnostics_message, publish_diagnostics
-from agent.bus.keys import Policy, RobotKeys, robot_wildcard
-from agent.bus.queryable import NO_STATE, StateCell, StateQueryable
+from agent.bus.keys import REQUEST_KEYS, Policy, RobotKeys, robot_wildcard
+from agent.bus.queryable import NO_STATE, RequestQueryable, StateCell, StateQueryable
 from agent.bus.ready import declare_ready
 from agent.bus.scene import areas_scene, graph_scene, people_scene
 from agent.bus.session import close_session, listening_endpoints, open_session
@@ -113,6 +118,7 @@ from agent.config import AgentConfig
 from agent.conversation.agent import STARTING, DialogueAgent, Outgoing, starting_reply
 from agent.conversation.memory import MemoryConcepts
 from agent.conversation.task import run_dialogue
+from agent.core.map_files import add_step, save_map
 from agent.core.odom_sync import Matched, OdomSync
 from agent.core.pipeline import Pipeline, PipelineParams, StepResult, place_message
 from agent.core.sensor_loop import SensorLoop
@@ -122,8 +128,9 @@ from agent.recording.recorder import McapSink, Recorder, recording_metadata
 from agent.supervisor import Restarts, supervise
 from drivers.camera.jpeg import decode_image
 from drivers.messages import LaserScan, Pose2D
-from knowledge.errors import ConfigError, DataError, ProtocolError
+from knowledge.errors import ConfigError, DataError, MapError, ProtocolError
 from knowledge.fileio import atomic_write_text, file_sha256, remove_stale_temps
+from knowledge.metric.mapping import ScanMapper
 from knowledge.people.detector import LegDetector
 from knowledge.places.model import PlaceModel
 from knowledge.topology import persistence
@@ -262,6 +269,8 @@ class Agent:
         }
         self._last_graph: dict[str, Any] | None = None
         self._last_areas: dict[str, Any] | None = None
+        #: the occupancy map of this run: every processed scan at its pose (``map/save`` writes it)
+        self.map = ScanMapper()
         #: changes of the persisted state (graph, areas, confirmed doorways) made / on disk:
         #: the state is dirty while ``_saved_gen < _gen``; saves run one at a time (a late
         #: write of an older state never replaces a newer one)
@@ -388,18 +397,30 @@ class Agent:
             laser_source=cfg.laser.source,
         )
 
-    def _declare_starting(self, session: zenoh.Session) -> list[StateQueryable]:
+    def _declare_starting(self, session: zenoh.Session) -> list[StateQueryable | RequestQueryable]:
         """What answers while the saved map loads: the state queryables (their cells say
-        ``starting``), ``dialogue/say``, and the intent subscription, served by a task that
-        replies "starting" to each intent until :meth:`_end_starting` (the dialogue then
-        serves the same subscription: no intent falls between the two)."""
+        ``starting``), ``map/save`` (no map yet), ``dialogue/say``, and the intent
+        subscription, served by a task that replies "starting" to each intent until
+        :meth:`_end_starting` (the dialogue then serves the same subscription: no intent falls
+        between the two)."""
         if self.config.conceptual.on:
             self._cells["concepts"] = StateCell("loci.concepts/1")
         for cell in self._cells.values():
             cell.pending = STARTING
-        queryables = [
+        queryables: list[StateQueryable | RequestQueryable] = [
             StateQueryable(session, self.keys.state(name), cell) for name, cell in self._cells.items()
         ]
+        request, reply = REQUEST_KEYS["map/save"]
+        queryables.append(
+            RequestQueryable(
+                session,
+                self.keys.stream("map/save"),
+                self._save_map,
+                request,
+                reply,
+                asyncio.get_running_loop(),
+            )
+        )
         self._pubs["dialogue/say"] = publish_stream(session, self.robot, "dialogue/say", stats=self.stats)
         self._intent_sub = Subscription(
             session,
@@ -490,7 +511,7 @@ class Agent:
         cfg = self.config
         self._started = time.monotonic()
         tasks: dict[str, asyncio.Task[Any]] = {}
-        queryables: list[StateQueryable] = []
+        queryables: list[StateQueryable | RequestQueryable] = []
         failure: BaseException | None = None
         sink: McapSink | None = None
         recorder: Recorder | None = None
@@ -753,6 +774,7 @@ class Agent:
         t0 = time.perf_counter()
         result = pipeline.process(m.scan, m.pose)
         self._publish(result)
+        add_step(self.map, result)
         self._last_processed_stamp = m.scan.stamp
         self._process_ms.append((time.perf_counter() - t0) * 1e3)
         if self._ready is None and self.session is not None:
@@ -896,6 +918,53 @@ class Agent:
             self._pubs["areas/scene"].put(areas_scene(areas, graph))
         if self.live is not None:
             self.live.on_state(self._last_graph, self._last_areas)
+
+    async def _save_map(self, request: dict[str, Any]) -> dict[str, Any]:
+        """``map/save``: the occupancy map of this run and its place labels into the folder the
+        request names (:func:`~agent.core.map_files.save_map`); a copy of the counts is taken
+        here, between two scans, and the grid is made and written on a worker thread.
+
+        Raises:
+            MapError: the folder is not an absolute path, is a file, already holds a map
+                (without ``overwrite``), cannot be written; or no scan is in the map yet.
+        """
+        folder = Path(request["dir"])
+        if not folder.is_absolute():
+            raise MapError(
+                f"{folder}: give the folder as an absolute path (a folder on the agent's computer; "
+                "the agent's working directory is not yours)"
+            )
+        pipeline = self.pipeline
+        if pipeline is None or self.map.lattice_origin is None:
+            raise MapError(
+                "no map yet: the agent has integrated no scan (is the laser running, and the odometry?)"
+            )
+        counts = self.map.copy()
+        graph = self._last_graph or pipeline.messages()[0]
+        overwrite = bool(request.get("overwrite", False))
+
+        def write() -> tuple[Any, list[Path]]:
+            grid = counts.grid(self.robot)
+            return grid, save_map(folder, grid, graph, overwrite=overwrite)
+
+        try:
+            grid, files = await asyncio.to_thread(write)
+        except OSError as exc:
+            raise MapError(f"cannot save the map in {folder}: {exc}") from exc
+        rows, cols = grid.shape
+        log.info("saved the map (%d x %d cells, %d scans) in %s", cols, rows, counts.scans, folder)
+        return {
+            "schema": "loci.map_saved/1",
+            "stamp": self._last_processed_stamp or time.time(),
+            "dir": str(folder),
+            "files": [str(f) for f in files],
+            "frame_id": "map" if pipeline.tracker is not None else "odom",
+            "resolution": grid.resolution,
+            "origin": list(grid.origin),
+            "width": cols,
+            "height": rows,
+            "scans": counts.scans,
+        }
 
     # ------------------------------------------------------------------ dialogue, concepts, camera
     async def _start_concepts(self) -> Any:
@@ -1173,7 +1242,7 @@ class Agent:
         tasks: dict[str, asyncio.Task[Any]],
         recorder: Recorder | None,
         sink: McapSink | None,
-        queryables: list[StateQueryable],
+        queryables: list[StateQueryable | RequestQueryable],
         session: zenoh.Session,
     ) -> None:
         try:

@@ -8,6 +8,8 @@ in the same orientation, so the map's resolution and origin place it in the worl
 ``nav_msgs/OccupancyGrid`` it publishes, and RViz or Foxglove draw them as a map layer over
 the occupancy map. (In ``raw`` mode map_server takes values above 100 as unknown, so a
 16-bit region image loaded this way shows its first 100 region ids only.)
+:func:`write_label_map` writes a label image with its YAML (and its legend, if it names
+codes of its own).
 
 :func:`with_legend` adds a strip under a coloured picture naming each class colour used.
 """
@@ -21,7 +23,8 @@ import cv2
 import numpy as np
 import yaml
 
-from knowledge.labels import CLASS_COLORS_BGR, CLASS_NAMES
+from knowledge.fileio import atomic_write_text
+from knowledge.labels import CLASS_COLORS_BGR, CLASS_NAMES, write_label_image
 
 #: Pixels of one legend row.
 LEGEND_ROW = 26
@@ -66,6 +69,22 @@ def label_map_yaml(
             "# " + ", ".join(f"{c} {n}" for c, n in sorted(names.items())) + "; 0 no label",
         ]
     return "\n".join(lines) + "\n" + yaml.safe_dump(meta, sort_keys=False)
+
+
+def write_label_map(
+    image_path: str | Path,
+    labels: np.ndarray,
+    resolution: float,
+    origin: tuple[float, float, float],
+    legend: Mapping[int, str] | None = None,
+) -> Path:
+    """Write ``labels`` (``(rows, cols)`` codes of a map with ``resolution`` and ``origin``)
+    as an 8-bit PNG, the legend JSON beside it if ``legend`` names codes other than the
+    standard ones, and its map_server YAML (:func:`label_map_yaml`, :func:`yaml_path`);
+    each file atomically. Returns the YAML's path."""
+    write_label_image(image_path, labels, legend)
+    text = label_map_yaml(Path(image_path).name, resolution, origin, legend=legend)
+    return atomic_write_text(yaml_path(image_path), text)
 
 
 def legend_entries(

@@ -56,7 +56,8 @@ class StreamSpec:
     description: str
 
 
-#: Every stream, by name. Queryables (``state/...``) are in :data:`STATE_KEYS`.
+#: Every stream, by name. Queryables are in :data:`STATE_KEYS` (``state/...``) and
+#: :data:`REQUEST_KEYS`.
 STREAMS: dict[str, StreamSpec] = {
     s.name: s
     for s in (
@@ -203,6 +204,12 @@ STATE_KEYS: dict[str, str] = {
     "areas": "loci.areas/1",
     "place": "loci.place/1",
     "concepts": "loci.concepts/1",
+}
+
+#: Queryables that do something on request, ``loci/<robot>/<name>``: name → the schemas of the
+#: request (the query's payload) and of the reply (an error reply is ``loci.error/1``).
+REQUEST_KEYS: dict[str, tuple[str, str]] = {
+    "map/save": ("loci.map_save/1", "loci.map_saved/1"),
 }
 
 

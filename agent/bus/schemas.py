@@ -649,3 +649,47 @@ LOCALIZATION = MessageSchema(
 
 for _schema in (LOCALIZED_POSE, LOCALIZATION):
     SCHEMAS.register(_schema)
+
+# ---- saving the map (loci/<r>/map/save, agent/core/map_files.py) -----------------------------
+
+_FOLDER = string(max_length=4096, description="an absolute path on the agent's computer")
+
+MAP_SAVE = MessageSchema(
+    "loci.map_save",
+    1,
+    obj(
+        {"dir": _FOLDER},
+        {
+            "overwrite": boolean(description="replace a map saved there before (default: refuse)"),
+            "stamp": _STAMP,
+        },
+    ),
+    description="a request to the agent: save the occupancy map and its place labels in a folder",
+    max_bytes=SMALL_MESSAGE_BYTES,
+)
+
+MAP_SAVED = MessageSchema(
+    "loci.map_saved",
+    1,
+    obj(
+        {
+            "stamp": _STAMP,
+            "dir": _FOLDER,
+            "files": array(string(max_length=4096), description="the files written, full paths"),
+            "frame_id": string(
+                max_length=64, description="the map's frame: 'map' with tracking, else 'odom'"
+            ),
+            "resolution": number(minimum=0, description="metres per cell"),
+            "origin": array(
+                number(), min_items=3, max_items=3, description="[x, y, yaw] of the map's lower-left corner"
+            ),
+            "width": integer(minimum=1, description="cells"),
+            "height": integer(minimum=1, description="cells"),
+            "scans": integer(minimum=0, description="scans integrated into the map"),
+        }
+    ),
+    description="the agent's answer to loci.map_save/1: where the map was saved, its size and frame",
+)
+
+for _schema in (MAP_SAVE, MAP_SAVED):
+    SCHEMAS.register(_schema)

@@ -185,6 +185,7 @@ def _evaluate_log(args: argparse.Namespace) -> int:
     import numpy as np
 
     from agent.config import load_config
+    from agent.core.map_files import add_step
     from agent.core.pipeline import PipelineParams, StepResult, areas_message, graph_message, place_message
     from agent.progress import Progress
     from agent.recording.offline import replay_recording
@@ -213,14 +214,7 @@ def _evaluate_log(args: argparse.Namespace) -> int:
         labels.append(result.label)
         if mapper is not None:
             places.append(json.dumps(place_message(result), separators=(",", ":")))
-            scan = result.scan
-            mapper.add(
-                scan.ranges,
-                scan.angles,
-                (p.x, p.y, p.theta),
-                range_max=scan.range_max,
-                range_min=scan.range_min,
-            )
+            add_step(mapper, result)
 
     with Progress(enabled=not args.quiet) as progress:
         res = replay_recording(

@@ -44,7 +44,7 @@ def register(subparsers: Any) -> None:
         ),
         epilog=(
             "Examples:\n"
-            "  loci localize csail_map.yaml --recording csail.mcap --json\n"
+            "  loci localize out/csail/map.yaml --recording csail.mcap --json   # the map: loci replay --out-dir\n"
             "  loci localize map.yaml --recording run.mcap --labels map.labels.png --out localized.mcap\n"
             "  loci localize map.yaml --recording run.mcap --initial 1.5 2.0 90 --publish"
         ),

@@ -538,8 +538,8 @@ def cmd_label(args: argparse.Namespace) -> int:
     from agent.progress import Progress
     from knowledge import labels as lbl
     from knowledge.errors import MapError
-    from knowledge.fileio import atomic_write_text, write_image
-    from knowledge.label_maps import label_map_yaml, legend_entries, with_legend, yaml_path
+    from knowledge.fileio import write_image
+    from knowledge.label_maps import legend_entries, with_legend, write_label_map, yaml_path
     from knowledge.metric.grid import OccupancyGrid
     from knowledge.places.labeling import label_map
 
@@ -552,10 +552,7 @@ def cmd_label(args: argparse.Namespace) -> int:
     model = _load_model(args.model)
     with Progress(enabled=not args.quiet) as progress:
         result = label_map(grid, model, progress=progress)
-    lbl.write_label_image(args.out, result.labels, result.legend)
-    atomic_write_text(
-        described, label_map_yaml(args.out.name, grid.resolution, grid.origin, legend=result.legend)
-    )
+    write_label_map(args.out, result.labels, grid.resolution, grid.origin, result.legend)
     overlay_path = args.overlay or args.out.with_name(args.out.stem + ".overlay.png")
     picture = lbl.overlay(grid.to_image(), result.labels)
     write_image(overlay_path, with_legend(picture, legend_entries(result.labels, result.legend)))
@@ -604,8 +601,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     from agent.progress import Progress
     from knowledge import labels as lbl
-    from knowledge.fileio import atomic_write_text, write_image
-    from knowledge.label_maps import label_map_yaml, legend_entries, with_legend
+    from knowledge.fileio import write_image
+    from knowledge.label_maps import legend_entries, with_legend, write_label_map
     from knowledge.learning.metrics import format_confusion, score
     from knowledge.places.labeling import label_map
     from knowledge.places.model import PlaceModel, default_map_model_path
@@ -634,11 +631,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     background = grid.to_image()
     truth_img = lbl.overlay(background, building.labels)
     pred_img = lbl.overlay(background, result.labels)
-    lbl.write_label_image(args.out / "labels.png", result.labels, result.legend)
-    atomic_write_text(
-        args.out / "labels.yaml",
-        label_map_yaml("labels.png", grid.resolution, grid.origin, legend=result.legend),
-    )
+    write_label_map(args.out / "labels.png", result.labels, grid.resolution, grid.origin, result.legend)
     grid.save(args.out / "map.yaml")  # map.pgm + map.yaml: the occupancy map for map_server
     write_image(args.out / "map.png", background)
     entries = legend_entries(np.concatenate([building.labels.ravel(), result.labels.ravel()]), result.legend)

@@ -41,8 +41,10 @@ def register(subparsers: Any) -> None:
         epilog=(
             "Examples:\n"
             "  loci replay run1.mcap --out-dir out/run1     "
-            "# navgraph.json, graph.json, areas.json, places.jsonl, map.png\n"
-            "  loci replay run1.mcap --places places.jsonl  # every loci.place/1 message, one per line"
+            "# navgraph.json, graph.json, areas.json, places.jsonl, map.png,\n"
+            "                                               # map.yaml + map.pgm, labels.png + labels.yaml\n"
+            "  loci replay run1.mcap --places places.jsonl  # every loci.place/1 message, one per line\n"
+            "  loci localize out/run1/map.yaml --recording run2.mcap --labels out/run1/labels.png"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -76,8 +78,11 @@ def register(subparsers: Any) -> None:
         "--out-dir",
         type=Path,
         metavar="DIR",
-        help="write navgraph.json, graph.json, areas.json, places.jsonl and map.png (the path "
-        "coloured by place label over a map built from the scans, with the graph and areas) here",
+        help="write navgraph.json, graph.json, areas.json, places.jsonl, map.png (the path "
+        "coloured by place label over a map built from the scans, with the graph and areas), and "
+        "that map as map.yaml + map.pgm (map_server, loci localize) with its place labels as "
+        "labels.png + labels.yaml (each free cell: the label of the nearest graph node along free "
+        "cells) here",
     )
     p.add_argument(
         "--places",
@@ -121,6 +126,7 @@ def _replay(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from agent.config import load_config
+    from agent.core.map_files import add_step, save_map
     from agent.core.odom_sync import SyncParams
     from agent.core.pipeline import PipelineParams, areas_message, graph_message, place_message
     from agent.progress import Progress
@@ -161,15 +167,8 @@ def _replay(args: argparse.Namespace) -> int:
         if want_places:
             places.append(json.dumps(place_message(result), separators=(",", ":")))
         if mapper is not None:
-            scan, pose = result.scan, result.pose
-            mapper.add(
-                scan.ranges,
-                scan.angles,
-                (pose.x, pose.y, pose.theta),
-                range_max=scan.range_max,
-                range_min=scan.range_min,
-            )
-            path.append((pose.x, pose.y, result.label))
+            add_step(mapper, result)
+            path.append((result.pose.x, result.pose.y, result.label))
 
     try:
         with Progress(enabled=not args.quiet) as progress:
@@ -209,8 +208,9 @@ def _replay(args: argparse.Namespace) -> int:
         atomic_write_text(out / "areas.json", json.dumps(areas, indent=1) + "\n")
         atomic_write_text(out / "places.jsonl", lines)
         assert mapper is not None
+        grid = mapper.grid(args.input.stem)
         render_layered_map(
-            mapper.grid(args.input.stem),
+            grid,
             graph,
             areas,
             out_png=out / "map.png",
@@ -218,7 +218,12 @@ def _replay(args: argparse.Namespace) -> int:
             title=f"{args.input.name}: {len(path)} scans, {len(graph['nodes'])} nodes, "
             f"{len(areas['areas'])} areas (path coloured by place label)",
         )
-        written.append(f"{out}/navgraph.json, graph.json, areas.json, places.jsonl, map.png")
+        save_map(out, grid, graph)
+        written.append(
+            f"{out}/navgraph.json, graph.json, areas.json, places.jsonl, map.png, map.yaml + map.pgm "
+            f"(the occupancy map, frame {'map' if pipeline.tracker is not None else 'odom'}), "
+            "labels.png + labels.yaml"
+        )
     if res.truncated:
         print(
             f"{args.input}: the recording ends without its footer (its writer stopped early); "

@@ -16,7 +16,9 @@ takes —
   once the person has walked farther than ``[people] min_travel`` — the masking kernels
   (``person_beams``, ``fill_masked``, ``unknown_masked``) with a non-empty mask;
 * pose tracking from the first scan: the first integration, the incremental field, the
-  matcher's local search and, with odometry that jumps once, its fallback search.
+  matcher's local search and, with odometry that jumps once, its fallback search;
+* the occupancy map of the run, which the agent integrates every processed scan into
+  (:func:`~agent.core.map_files.add_step`; the tracker's own map only with tracking on).
 
 :func:`compiled_kernels` lists the project's compiled numba functions and their signatures;
 the tests check that after :func:`warm_up` a real tour compiles nothing more. While the agent
@@ -34,8 +36,10 @@ from typing import Any
 
 import numpy as np
 
+from agent.core.map_files import add_step
 from agent.core.pipeline import TWO_PI, Pipeline, PipelineParams
 from drivers.messages import LaserScan, Pose2D
+from knowledge.metric.mapping import ScanMapper
 from knowledge.people.detector import LegDetector
 from knowledge.places.model import PlaceModel
 
@@ -132,9 +136,10 @@ def warm_up(
     prm = replace(params or PipelineParams(), tracking_lag=0)
     for full in (False, True):
         p = Pipeline(model, prm, people_detector=people_detector)
+        mapper = ScanMapper()
         try:
             for scan, pose in scenario(full):
-                p.process(scan, pose)
+                add_step(mapper, p.process(scan, pose))
         finally:
             p.close()
     return time.perf_counter() - t0

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import asyncio
 import time
 from typing import Any
 
 import pytest
 
 from agent.bus.keys import RobotKeys
-from agent.bus.queryable import StateCell, StateQueryable, query_state
+from agent.bus.queryable import RequestQueryable, StateCell, StateQueryable, query_state, request
 from agent.bus.testing import session_pair, settle
 from knowledge.errors import ProtocolError
 
@@ -87,3 +88,55 @@ def test_nobody_answering_returns_empty_after_the_timeout() -> None:
         t0 = time.monotonic()
         assert query_state(b, "loci/nobody/state/**", timeout=0.3) == []
         assert time.monotonic() - t0 < 3.0
+
+
+def test_a_request_is_answered_from_the_loop_and_refusals_say_why() -> None:
+    """A request queryable hands each validated request to a coroutine on the event loop
+    (Zenoh's thread does not wait for it: two slow requests overlap), sends its reply, and
+    answers a refusal (ValueError, OSError, LociError) with its message and any other failure
+    with the exception's name."""
+    key = KEYS.stream("map/save")
+
+    async def handler(req: dict[str, Any]) -> dict[str, Any]:
+        folder = req["dir"]
+        if folder == "/refused":
+            raise ValueError("no map yet")
+        if folder == "/broken":
+            raise KeyError("bug")
+        await asyncio.sleep(1.0)
+        return {
+            "schema": "loci.map_saved/1",
+            "stamp": 1.0,
+            "dir": folder,
+            "files": [f"{folder}/map.yaml"],
+            "frame_id": "odom",
+            "resolution": 0.05,
+            "origin": [0.0, 0.0, 0.0],
+            "width": 3,
+            "height": 2,
+            "scans": 7,
+        }
+
+    def ask(folder: str) -> Any:
+        msg = {"schema": "loci.map_save/1", "dir": folder}
+        return request(b, key, msg, "loci.map_save/1", timeout=5.0)
+
+    async def main() -> None:
+        with RequestQueryable(
+            a, key, handler, "loci.map_save/1", "loci.map_saved/1", asyncio.get_running_loop()
+        ) as q:
+            await asyncio.to_thread(settle, b, a)
+            t0 = time.monotonic()
+            first, second = await asyncio.gather(asyncio.to_thread(ask, "/x"), asyncio.to_thread(ask, "/y"))
+            assert time.monotonic() - t0 < 1.9  # both handled at once, not one after the other
+            assert first[0].value["dir"] == "/x" and second[0].value["dir"] == "/y"
+            (refused,) = await asyncio.to_thread(ask, "/refused")
+            assert refused.value is None and refused.error == "no map yet"
+            (broken,) = await asyncio.to_thread(ask, "/broken")
+            assert broken.error == "KeyError: 'bug'"
+            (empty,) = await asyncio.to_thread(query_state, b, key, 5.0)  # a query without a request
+            assert empty.error is not None and "carries a loci.map_save/1 request" in empty.error
+            assert q.queries == 5
+
+    with session_pair() as (a, b):
+        asyncio.run(main())

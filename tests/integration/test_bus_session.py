@@ -13,6 +13,7 @@ import pytest
 
 from agent.bus.codecs import codec_for
 from agent.bus.keys import (
+    REQUEST_KEYS,
     STATE_KEYS,
     STREAMS,
     RobotKeys,
@@ -60,6 +61,8 @@ def test_the_docs_list_every_stream() -> None:
         assert f"| `loci/<r>/{spec.name}` | `{spec.schema}` |" in doc, f"add {spec.name} to docs/bus.md"
     for name, schema in STATE_KEYS.items():
         assert f"| `loci/<r>/state/{name}` | `{schema}` |" in doc
+    for name, (ask, answer) in REQUEST_KEYS.items():
+        assert f"| `loci/<r>/{name}` | `{ask}` → `{answer}` |" in doc, f"add {name} to docs/bus.md"
 
 
 def test_bus_config_checks_and_names_keys() -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -17,6 +18,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+import yaml
+from scipy import ndimage
 from support.recordings import ROBOT, T0, Run, expected, loci, make_run, write_recording
 
 from agent.bus.bridge import RawSample
@@ -28,9 +31,12 @@ from agent.recording.offline import read_recording_metadata, replay_recording
 from agent.recording.recorder import McapSink, recording_metadata
 from agent.recording.replay import McapMessages
 from drivers.messages import Pose2D
+from knowledge.labels import CLASS_CODES, read_label_image
+from knowledge.metric.grid import OccupancyGrid
 from knowledge.navigation.graph import GraphParams
 from knowledge.places.model import PlaceModel, default_model_path
 from knowledge.topology import persistence
+from sim.buildings import generate_building
 
 
 @pytest.fixture(scope="module")
@@ -70,6 +76,67 @@ def test_loci_replay_rebuilds_the_map_and_writes_it(tmp_path: Path, run: Run, mo
     g, a = persistence.load(tmp_path / "out" / "navgraph.json")
     assert sorted(g.nodes) == sorted(want.graph.nodes) and a is not None
     assert {k: n.label for k, n in g.nodes.items()} == {k: n.label for k, n in want.graph.nodes.items()}
+
+
+@pytest.mark.slow
+def test_loci_replay_saves_the_map_it_built_for_map_server_and_loci_localize(
+    tmp_path: Path, run: Run
+) -> None:
+    """--out-dir writes the occupancy map as map_server YAML + PGM and its label image; loaded
+    back, its walls and free space lie where the building's are, its labels are the graph's,
+    and ``loci localize`` tracks the recording in it."""
+    rec = tmp_path / "run.mcap"
+    write_recording(rec, run)
+    out = tmp_path / "out"
+    done = loci("replay", rec, "--out-dir", out)
+    assert done.returncode == 0, done.stderr
+    assert "map.yaml + map.pgm (the occupancy map, frame odom), labels.png + labels.yaml" in done.stdout
+    meta = yaml.safe_load((out / "map.yaml").read_text())
+    assert meta["image"] == "map.pgm" and meta["resolution"] == 0.05 and len(meta["origin"]) == 3
+    assert (out / "map.pgm").read_bytes().startswith(b"P5")  # binary PGM, as map_saver writes
+    grid = OccupancyGrid.load(out / "map.yaml")
+    truth = generate_building(3, furniture=False, layout="straight").grid  # the world make_run drove
+    # every wall cell of the map is on a wall of the building (within 2 cells, 10 cm) ...
+    walls = ndimage.binary_dilation(truth.occupied, iterations=2)
+    cells = truth.world_to_cell(grid.cell_to_world(np.argwhere(grid.occupied)))
+    assert len(cells) > 500 and truth.in_bounds(cells).all()
+    assert walls[cells[:, 0], cells[:, 1]].mean() > 0.98
+    # ... every free cell in the building's free space (within a cell) ...
+    space = ndimage.binary_dilation(truth.free, iterations=1)
+    cells = truth.world_to_cell(grid.cell_to_world(np.argwhere(grid.free)))
+    assert len(cells) > 20_000 and space[cells[:, 0], cells[:, 1]].mean() > 0.99
+    # ... the corridor the robot drove is free, and its two walls beside the drive are in the map
+    path = np.array([(p.x, p.y) for p in run.scan_poses])
+    on_path = grid.world_to_cell(path)
+    assert grid.free[on_path[:, 0], on_path[:, 1]].all()
+    _, y0, _, y1 = generate_building(3, furniture=False, layout="straight").corridors[0].rects[0]
+    near = ndimage.binary_dilation(grid.occupied, iterations=2)
+    for wall_y in (y0 - 0.5 * truth.resolution, y1 + 0.5 * truth.resolution):
+        xs = np.arange(path[0, 0], path[-1, 0], 0.05)
+        points = np.stack([xs, np.full_like(xs, wall_y)], axis=1)
+        t = truth.world_to_cell(points)
+        solid = points[truth.occupied[t[:, 0], t[:, 1]]]  # the wall, not its doors
+        c = grid.world_to_cell(solid)
+        assert len(solid) > 40 and near[c[:, 0], c[:, 1]].mean() > 0.95, wall_y
+    # the label image: one code per map cell, labels only on free cells (all but cells no free
+    # path joins to the drive), each node's own label at its cell
+    codes = read_label_image(out / "labels.png")
+    assert codes.shape == grid.shape and not codes[~grid.free].any()
+    assert (codes[grid.free] > 0).mean() > 0.999
+    graph = json.loads((out / "graph.json").read_text())
+    at = grid.world_to_cell(np.array([(n["x"], n["y"]) for n in graph["nodes"]]))
+    assert [int(codes[r, c]) for r, c in at] == [CLASS_CODES[n["label"]] for n in graph["nodes"]]
+    assert yaml.safe_load((out / "labels.yaml").read_text())["origin"] == meta["origin"]
+    # loci localize tracks the run in the saved map, labels included
+    start, end = run.scan_poses[0], run.scan_poses[-1]
+    done = loci(
+        "localize", out / "map.yaml", "--recording", rec, "--labels", out / "labels.png",
+        "--initial", start.x, start.y, 0, "--particles", 500, "--json",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    s = json.loads(done.stdout)
+    assert s["mode"] == "tracking" and s["semantic"] is True and s["updates"] > 20
+    assert math.hypot(s["pose"]["x"] - end.x, s["pose"]["y"] - end.y) < 0.2, s["pose"]
 
 
 @pytest.mark.slow

@@ -306,9 +306,10 @@ class PipelineParams:
             raise ConfigError(f"pipeline parameters: mount must be [x, y, yaw], got {mount!r}")
         return cls(
             mount=(float(mount[0]), float(mount[1]), float(mount[2])),
-            # a table without "grazing" was written before the grazing-beam rule: none (as recorded)
+            # a table without "grazing" was written before the grazing-beam rule, one without
+            # "bracket" before the two-beam rule: neither (as recorded)
             local_map=build_dataclass(
-                LocalMapParams, {"grazing": None, **table.get("local_map", {})}, "local_map"
+                LocalMapParams, {"grazing": None, "bracket": False, **table.get("local_map", {})}, "local_map"
             ),
             rear_beams=build_dataclass(FullScanParams, table.get("rear_beams", {}), "rear_beams"),
             graph=build_dataclass(GraphParams, table.get("graph", {}), "graph"),

@@ -45,6 +45,14 @@ class LocalMapParams:
             end-on is passed by the beams by a hair, and nothing was seen through it (the
             wall beyond a door jamb, which the doorway detector needs, went so). None: clear
             by the beam at the bearing alone (the rule before; older recordings replay with it).
+        bracket: a stored point is cleared only when the beams on both sides of its bearing
+            pass beyond it. A point on an object's silhouette edge (a table's corner, a door
+            jamb seen at a slant) lies between a beam that hits the object and one that just
+            misses it: by the nearest beam alone it went when the miss was the nearer (a
+            table's side beyond the tour's false doorway lost the cell by its corner so, and
+            with it the "wall" the doorway detector needs). A person who walked away is
+            still seen through by both. False: the nearest beam (the rule before; older
+            recordings replay with it).
     """
 
     radius: float = 25.0
@@ -53,6 +61,7 @@ class LocalMapParams:
     cell: float = 0.1
     clear_margin: float | None = 0.3
     grazing: float | None = 0.1
+    bracket: bool = True
 
     def __post_init__(self) -> None:
         for name in ("radius", "max_age", "cell"):
@@ -69,6 +78,8 @@ class LocalMapParams:
             raise ValueError(
                 f"LocalMapParams.grazing must be radians in (0, π/2) or None, got {self.grazing!r}"
             )
+        if not isinstance(self.bracket, bool):
+            raise ValueError(f"LocalMapParams.bracket must be true or false, got {self.bracket!r}")
         if self.clear_margin is not None and not (
             math.isfinite(self.clear_margin) and self.clear_margin >= 0
         ):
@@ -285,6 +296,7 @@ class LocalMap:
             float(self.params.clear_margin),
             -1.0 if self.params.grazing is None else float(self.params.grazing),
             2.5 * float(self.params.cell),
+            bool(self.params.bracket),
         )
 
 
@@ -338,10 +350,11 @@ def _seen_through(
     margin: float,
     grazing: float,
     reach: float,
+    bracket: bool,
 ) -> np.ndarray:
-    """Points whose nearest beam (sorted ``angles``) is valid and ends ``margin`` beyond them,
-    unless (``grazing`` > 0) the beam runs along a surface through the point
-    (:func:`_along_surface`)."""
+    """Points whose nearest beam (sorted ``angles``) is valid and ends ``margin`` beyond them
+    — with ``bracket``, both beams on either side of the point's bearing — unless
+    (``grazing`` > 0) the beam runs along a surface through the point (:func:`_along_surface`)."""
     out = np.zeros(xy.shape[0], dtype=np.bool_)
     longest = 0.0
     for j in range(ranges.size):
@@ -375,6 +388,10 @@ def _seen_through(
             k = j - 1 if b - angles[j - 1] <= angles[j] - b else j
         if not (valid[k] and ranges[k] > d + margin):
             continue
+        if bracket and 0 < j < angles.size:
+            o = j if k == j - 1 else j - 1  # the beam on the point's other side
+            if not (valid[o] and ranges[o] > d + margin):
+                continue
         if grazing > 0.0 and _along_surface(xy, i, x, y, c, s, px, py, d, reach, grazing):
             continue
         out[i] = True

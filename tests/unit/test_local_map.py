@@ -172,3 +172,32 @@ def test_a_surface_seen_end_on_is_not_cleared_by_the_beams_that_run_along_it() -
         assert (still == before) if kept else (still < before), (grazing, before, still)
     with pytest.raises(ValueError, match="grazing"):
         LocalMapParams(grazing=2.0)
+
+
+@pytest.mark.parametrize("bracket", [True, False])
+def test_a_point_on_an_objects_edge_stays_while_one_beam_beside_it_still_hits(bracket: bool) -> None:
+    """A table's corner seen at a slant lies between a beam that hits the table and one that
+    just misses it. Cleared by the nearer beam alone when that is the miss (the cell by the
+    corner of the table beside the tour's false doorway went so, and with it the wall the
+    doorway detector needs: no question about the door, issue 24); kept while the beam on its
+    other side still hits. A point both beams pass (a person who walked away) goes either way."""
+    step = float(SICK[1] - SICK[0])
+    k = 180  # straight ahead
+    first = np.full(361, 30.0)
+    first[k] = 2.0
+    m = LocalMap(LocalMapParams(bracket=bracket))
+    m.add(first, SICK, (0.0, 0.0, 0.0), stamp=0.0, range_max=30.0)
+    assert len(m) == 1
+    # turned left by 0.3 of a beam step: the point's bearing lies 0.3 of a step right of beam k
+    # (the nearer) and 0.7 of a step left of beam k - 1
+    pose = (0.0, 0.0, 0.3 * step)
+    edge = np.full(361, 30.0)
+    edge[k - 1] = 2.15  # the table, just beside the corner (in the next cell)
+    m.add(edge, SICK, pose, stamp=0.1, range_max=30.0)
+    corner = np.hypot(m.points[:, 0] - 2.0, m.points[:, 1]) < 1e-6
+    assert corner.any() == bracket, m.points
+    # both beams beside it pass it: seen through, whatever the rule
+    m.add(np.full(361, 30.0), SICK, pose, stamp=0.2, range_max=30.0)
+    assert not (np.hypot(m.points[:, 0] - 2.0, m.points[:, 1]) < 1e-6).any()
+    with pytest.raises(ValueError, match="bracket"):
+        LocalMapParams(bracket=1)  # type: ignore[arg-type]

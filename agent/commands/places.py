@@ -201,6 +201,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="label every free cell of a map",
         description="Label every free cell of an occupancy map with a place model. Writes the label codes "
         "(0 none, 1 room, 2 corridor, 3 doorway, 4 hallway) as an 8-bit PNG and a coloured overlay PNG.",
+        epilog="--method iamn (Sect. 4.6) labels all cells together: nodes every 0.2 m, FDR-selected features, "
+        "nearest-neighbour transform, MAP in an associative Markov network; it needs an iAMN --model "
+        "(tools/iamn_experiment.py writes one; docs/places.md, 'iAMN (Sect. 4.6)').",
     )
     la.add_argument("map", type=Path, metavar="MAP", help="map_server YAML, or an image with --resolution")
     la.add_argument("--resolution", type=float, metavar="M", help="metres per cell for image maps")
@@ -208,7 +211,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "--model",
         type=Path,
         default=None,
-        help="a place model (default: the bundled map model, default_map.npz)",
+        help="a place model (default: the bundled map model, default_map.npz; --method iamn: required)",
+    )
+    la.add_argument(
+        "--method",
+        choices=("adaboost", "iamn"),
+        default="adaboost",
+        help="adaboost: the decision list cell by cell (default); iamn: an instance-based associative Markov network",
     )
     la.add_argument(
         "--out",
@@ -549,9 +558,22 @@ def cmd_label(args: argparse.Namespace) -> int:
             f"--out {args.out} would replace the input map {args.map} with its YAML; name it otherwise"
         )
     grid = OccupancyGrid.load(args.map, args.resolution)
-    model = _load_model(args.model)
-    with Progress(enabled=not args.quiet) as progress:
-        result = label_map(grid, model, progress=progress)
+    if args.method == "iamn":
+        from knowledge.places.iamn import IAMNModel, label_map_iamn
+
+        if args.model is None:
+            raise SystemExit(
+                "loci places label: --method iamn needs --model IAMN.npz (there is no bundled iAMN)"
+            )
+        iamn = IAMNModel.load(args.model)
+        with Progress(enabled=not args.quiet) as progress:
+            result, _, _ = label_map_iamn(grid, iamn, progress=progress)
+    else:
+        if not grid.free.any():
+            raise MapError(f"{args.map}: no free cells to label; is the map's free space white?")
+        model = _load_model(args.model)
+        with Progress(enabled=not args.quiet) as progress:
+            result = label_map(grid, model, progress=progress)
     write_label_map(args.out, result.labels, grid.resolution, grid.origin, result.legend)
     overlay_path = args.overlay or args.out.with_name(args.out.stem + ".overlay.png")
     picture = lbl.overlay(grid.to_image(), result.labels)
@@ -560,6 +582,7 @@ def cmd_label(args: argparse.Namespace) -> int:
     area = {c: round(n * grid.resolution**2, 2) for c, n in counts.items()}
     summary = {
         "map": str(args.map),
+        "method": args.method,
         "cells": len(result.cells),
         "resolution": grid.resolution,
         "classes": list(result.classes),

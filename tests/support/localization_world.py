@@ -71,11 +71,12 @@ def scans(grid: OccupancyGrid, poses: np.ndarray, seed: int = 0) -> np.ndarray:
 
 
 def drifting_odometry(
-    poses: np.ndarray, seed: int = 0, drift: float = 0.02, scale: float = 1.03
+    poses: np.ndarray, seed: int = 0, drift: float = 0.02, scale: float = 1.03, *, from_truth: bool = False
 ) -> np.ndarray:
-    """Odometry that overestimates distance by ``scale`` and drifts ``drift`` rad per metre."""
+    """Odometry that overestimates distance by ``scale`` and drifts ``drift`` rad per metre,
+    from the origin (or, ``from_truth``, from the first true pose)."""
     rng = np.random.default_rng(seed)
-    odo = [np.array([0.0, 0.0, 0.0])]
+    odo = [np.array(poses[0], dtype=float) if from_truth else np.array([0.0, 0.0, 0.0])]
     for a, b in itertools.pairwise(poses):
         d = between(a, b)
         dist = math.hypot(d[0], d[1])

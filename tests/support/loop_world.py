@@ -9,10 +9,10 @@ import math
 import numpy as np
 
 from knowledge.localization.scan_matching import scan_points
-from knowledge.localization.se2 import between, compose
 from knowledge.metric.beams import beam_angles
 from knowledge.metric.grid import OccupancyGrid
 from knowledge.metric.raycast import cast
+from support.localization_world import drifting_odometry as _drifting
 
 RES = 0.05
 BEAMS = 181
@@ -84,12 +84,5 @@ def drifting_odometry(
     poses: np.ndarray, seed: int = 0, drift: float = 0.01, scale: float = 1.02
 ) -> np.ndarray:
     """Odometry from the first true pose that overestimates distance by ``scale`` and turns
-    ``drift`` rad per metre too far left."""
-    rng = np.random.default_rng(seed)
-    odo = [poses[0].copy()]
-    for a, b in itertools.pairwise(poses):
-        d = between(a, b)
-        dist = math.hypot(d[0], d[1])
-        noisy = np.array([d[0] * scale, d[1] * scale, d[2] + drift * dist + rng.normal(0, 0.002)])
-        odo.append(compose(odo[-1], noisy))
-    return np.array(odo)
+    ``drift`` rad per metre too far left (:func:`support.localization_world.drifting_odometry`)."""
+    return _drifting(poses, seed, drift, scale, from_truth=True)
